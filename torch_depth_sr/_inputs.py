@@ -1,0 +1,144 @@
+"""Turn what users pass (numpy or torch, many layouts and dtypes) into model tensors and back.
+
+Depth layouts: ``(H,W)``, ``(1,H,W)``, ``(B,1,H,W)``; dtypes float16/32/64, uint8, uint16, int32.
+0 or NaN means "no measurement". Colour: ``(B,3,H,W)``/``(3,H,W)`` float in [0,1] (torch or numpy),
+``H×W×3`` (numpy, RGB order) uint8 or float in [0,1], or ``(B,1,H,W)``/``H×W`` greyscale.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from .errors import DTypeError, InvalidDepthError, ShapeError
+
+_DEPTH_INT_DTYPES = (torch.uint8, torch.uint16, torch.int16, torch.int32, torch.int64)
+
+
+@dataclass(frozen=True)
+class DepthLayout:
+    """How the user's depth arrived, so the result can go back the same way."""
+
+    was_numpy: bool
+    ndim: int
+    dtype: Any  # numpy dtype or torch dtype
+    device: torch.device
+
+
+def _as_tensor(x: Any, name: str) -> tuple[torch.Tensor, bool]:
+    if isinstance(x, torch.Tensor):
+        return x, False
+    if isinstance(x, np.ndarray):
+        if x.dtype == np.uint16:  # torch.from_numpy supports uint16 only in recent versions; widen safely
+            return torch.from_numpy(x.astype(np.int32)), True
+        if x.dtype.kind not in "fiub":
+            raise DTypeError(f"{name} has numpy dtype {x.dtype}; allowed are float, unsigned/signed int or bool.")
+        return torch.from_numpy(np.ascontiguousarray(x)), True
+    raise DTypeError(f"{name} must be a torch.Tensor or numpy.ndarray; got {type(x).__name__}.")
+
+
+def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch.float32):
+    """Return ``(y (B,1,H,W) float with 0 at missing, observed (B,1,H,W) float, layout)``.
+
+    Raises:
+        ShapeError: the layout is not one of the allowed ones.
+        DTypeError: complex, bool or object dtypes.
+        InvalidDepthError: negative or infinite depth, or a sample with no measured pixel.
+    """
+    orig_dtype = depth.dtype if isinstance(depth, (torch.Tensor, np.ndarray)) else None
+    t, was_numpy = _as_tensor(depth, "depth")
+    if t.dtype == torch.bool or t.is_complex():
+        raise DTypeError(f"depth has dtype {t.dtype}; allowed are float16/32/64, uint8, uint16 or int32.")
+    ndim = t.ndim
+    if ndim == 2:
+        t = t[None, None]
+    elif ndim == 3:
+        if t.shape[0] != 1:
+            raise ShapeError(f"depth with 3 dims must be (1,H,W); got {tuple(t.shape)}. "
+                             "Use (B,1,H,W) for a batch.")
+        t = t[None]
+    elif ndim == 4:
+        if t.shape[1] != 1:
+            raise ShapeError(f"depth must have one channel, (B,1,H,W); got {tuple(t.shape)}.")
+    else:
+        raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.")
+    if t.shape[0] == 0 or t.shape[-1] == 0 or t.shape[-2] == 0:
+        raise ShapeError(f"depth is empty: shape {tuple(t.shape)}.")
+    y = t.to(compute_dtype) if t.is_floating_point() or t.dtype in _DEPTH_INT_DTYPES else t.to(compute_dtype)
+    finite_or_nan = torch.isfinite(y) | torch.isnan(y)
+    if not bool(finite_or_nan.all()):
+        raise InvalidDepthError("depth contains +/-inf; allowed are finite values, with 0 or NaN for "
+                                "'no measurement'. Replace inf by NaN (e.g. PFM files mark unknown with inf).")
+    if bool((y < 0).any()):
+        raise InvalidDepthError(f"depth contains negative values (min {float(torch.nan_to_num(y).min()):g}); "
+                                "allowed are depth/disparity >= 0 with 0 or NaN meaning 'no measurement'.")
+    observed = torch.isfinite(y) & (y > 0)
+    if mask is not None:
+        m, _ = _as_tensor(mask, "mask")
+        if m.shape[-2:] != y.shape[-2:] or m.numel() != y.numel():
+            raise ShapeError(f"mask must have the same shape as depth; got mask {tuple(m.shape)} and depth "
+                             f"{tuple(t.shape if ndim == 4 else depth.shape)}.")
+        observed = observed & (m.reshape(y.shape).to(y.device) > 0)
+    y = torch.where(observed, y, torch.zeros_like(y))
+    counts = observed.flatten(1).sum(1)
+    if bool((counts == 0).any()):
+        bad = torch.nonzero(counts == 0).flatten().tolist()
+        raise InvalidDepthError(f"depth sample(s) {bad} have no measured pixel (all 0 or NaN); "
+                                "at least one pixel > 0 is needed to restore a depth map.")
+    layout = DepthLayout(was_numpy=was_numpy, ndim=ndim, dtype=orig_dtype, device=t.device)
+    return y, observed.to(compute_dtype), layout
+
+
+def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """Return colour as ``(B,3,H,W)`` float in [0,1] on ``device``."""
+    t, was_numpy = _as_tensor(rgb, "rgb")
+    if t.dtype == torch.bool or t.is_complex():
+        raise DTypeError(f"rgb has dtype {t.dtype}; allowed are uint8 (0..255) or float in [0,1].")
+    is_int = not t.is_floating_point()
+    if was_numpy and t.ndim == 3 and t.shape[-1] in (1, 3):
+        t = t.permute(2, 0, 1)  # numpy colour is H×W×C -> (C,H,W)
+    if t.ndim == 2:
+        t = t[None, None]
+    elif t.ndim == 3:
+        t = t[None]
+    if t.ndim != 4 or t.shape[1] not in (1, 3):
+        raise ShapeError(f"rgb must be (B,3,H,W), (3,H,W), H×W×3 (numpy) or greyscale; got {tuple(rgb.shape)}.")
+    t = t.to(device=device, dtype=dtype)
+    if is_int:
+        t = t / 255.0
+    if not bool(torch.isfinite(t).all()):
+        raise DTypeError("rgb contains NaN or inf; allowed are finite values in [0,1] (float) or 0..255 (uint8).")
+    lo, hi = float(t.min()), float(t.max())
+    if lo < -1e-3 or hi > 1 + 1e-3:
+        raise DTypeError(f"float rgb must lie in [0,1]; got values in [{lo:g}, {hi:g}]. "
+                         "Divide 8-bit colour by 255 (or pass it as uint8).")
+    if t.shape[1] == 1:
+        t = t.expand(-1, 3, -1, -1)
+    if t.shape[0] == 1 and batch > 1:
+        t = t.expand(batch, -1, -1, -1)
+    if t.shape[0] != batch:
+        raise ShapeError(f"rgb batch size {t.shape[0]} does not match depth batch size {batch}.")
+    return t.clamp(0, 1).contiguous()
+
+
+def restore_layout(x: torch.Tensor, layout: DepthLayout) -> Any:
+    """Return ``x (B,1,H,W)`` in the user's layout, dtype, device and array type."""
+    if layout.ndim == 2:
+        x = x[0, 0]
+    elif layout.ndim == 3:
+        x = x[0]
+    x = x.to(layout.device)
+    if layout.was_numpy:
+        arr = x.detach().cpu().numpy()
+        dt = np.dtype(layout.dtype)
+        if dt.kind in "ui":
+            info = np.iinfo(dt)
+            arr = np.clip(np.rint(arr), max(info.min, 0), info.max)
+        return arr.astype(dt)
+    dt = layout.dtype
+    if not dt.is_floating_point:
+        info = torch.iinfo(dt)
+        x = x.round().clamp(max(info.min, 0), info.max)
+    return x.to(dt)

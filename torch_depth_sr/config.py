@@ -1,0 +1,71 @@
+"""Settings of the restoration model (all thresholds in multiples of the noise level; see ``noise.py``)."""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+
+
+@dataclass
+class RestorerConfig:
+    """Every setting of :class:`~torch_depth_sr.DepthRestorer`, JSON-serialisable.
+
+    Units: depth is normalised by the estimated noise level (scale policy in ``noise.py``),
+    so ``lam``, ``eta``, ``gamma`` and ``singular_sigma_floor`` are in noise-σ units, and
+    ``temperature`` is in σ² per block pixel.
+    """
+
+    num_layers: int = 8
+    # initial values of each layer's parameters (softplus-positive when trainable)
+    lam: float = 1.0  # λ: TV weight
+    eta: float = 1.0  # η: nonlocal-gradient weight
+    gamma: float = 3.0  # γ: sparse outlier threshold
+    mu1: float = 0.5  # μ₁: splitting weight for z ≈ Dx
+    mu2: float = 0.5  # μ₂: splitting weight for w ≈ Dx − α
+    isotropic: bool = False  # isotropic (group) TV shrinkage instead of anisotropic
+    # terms (ablations: tv = all False; tv+nl = use_nonlocal only)
+    use_nonlocal: bool = True
+    use_outliers: bool = True
+    use_singular: bool = True
+    # block matching
+    block_size: int = 5
+    search_window: int = 21
+    k: int = 10
+    color_weight: float = 100.0  # ρ: colour distance weight (colour in [0,1])
+    temperature: float = 1.0  # h: weight temperature
+    include_self: bool = False
+    match_layers: tuple = (2, 5)  # layers that redo block matching on the current x (it always runs once on x⁰)
+    # singular pixel detection
+    singular_tau: float = 0.5
+    singular_sigma_floor: float = 2.5
+    singular_rounds: int = 3
+    # linear solves
+    cg_tol: float = 1e-3
+    cg_max_iter: int = 50
+    precondition: bool = True
+    implicit_backward: bool = False
+    extra: dict = field(default_factory=dict)
+
+    def replace(self, **changes) -> "RestorerConfig":
+        return dataclasses.replace(self, **changes)
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self), indent=2, sort_keys=True)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RestorerConfig":
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown RestorerConfig keys {sorted(unknown)}; allowed are {sorted(known)}.")
+        d = dict(d)
+        if "match_layers" in d:
+            d["match_layers"] = tuple(d["match_layers"])
+        return cls(**d)
+
+
+ABLATIONS = {
+    "tv": dict(use_nonlocal=False, use_outliers=False, use_singular=False),
+    "tv+nl": dict(use_nonlocal=True, use_outliers=False, use_singular=False),
+    "full": dict(use_nonlocal=True, use_outliers=True, use_singular=True),
+}

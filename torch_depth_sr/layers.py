@@ -1,0 +1,169 @@
+r"""One unrolled iteration of the half-quadratic splitting (model.md, Algorithm 3.1).
+
+With :math:`z \approx Dx` and :math:`w \approx Dx-\alpha`, layer :math:`k` updates, in this order,
+
+.. math::
+    z &= \operatorname{soft}(Dx, \lambda_k/\mu_{1,k}) \\
+    w &= \operatorname{soft}(Dx-\alpha, \eta_k/\mu_{2,k}) \\
+    e &= Q \odot \operatorname{soft}(y-Kx, \gamma_k) \\
+    \alpha &= \textstyle\sum_j \omega_{ij} D_j x \quad\text{(block matching when scheduled)} \\
+    Q &= \text{singular-pixel test} \\
+    x &= (K^\top Q K + (\mu_{1,k}+\mu_{2,k}) D^\top D)^{-1}
+         \big(K^\top Q (y-e) + \mu_{1,k} D^\top z + \mu_{2,k} D^\top (w+\alpha)\big)
+
+Terms switched off in the config drop out of both the updates and the linear system, so the
+ablations (TV only, TV + nonlocal) run through this same code.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Optional
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .block_matching import BlockMatches, block_match
+from .config import RestorerConfig
+from .nonlocal_prior import nonlocal_gradient
+from .operators import grad, grad_adjoint, laplacian
+from .shrinkage import group_soft_threshold, soft_threshold
+from .singular import detect_singular
+from .solvers.dct import NeumannPreconditioner
+from .solvers.implicit import cg_solve
+
+
+def _inv_softplus(v: float) -> float:
+    v = float(v)
+    return v + torch.log(-torch.expm1(torch.tensor(-v))).item() if v < 20 else v
+
+
+@dataclass
+class RestorationState:
+    """Variables carried from layer to layer (all in normalised units)."""
+
+    x: torch.Tensor  # (B,1,H,W) estimate on the output grid
+    z: torch.Tensor  # (B,2,H,W)
+    w: torch.Tensor  # (B,2,H,W)
+    e: torch.Tensor  # (B,1,h,w) outliers on the observation grid
+    alpha: torch.Tensor  # (B,2,H,W)
+    q: torch.Tensor  # (B,1,h,w) {0,1} trusted pixels
+    confidence: torch.Tensor  # (B,1,h,w) in [0,1]
+    matches: Optional[BlockMatches]
+    cg_iterations: list
+
+
+@dataclass
+class RestorationContext:
+    """What stays fixed during the unrolled iterations."""
+
+    y: torch.Tensor  # (B,1,h,w) normalised observation, 0 where missing
+    observed: torch.Tensor  # (B,1,h,w)
+    rgb: Optional[torch.Tensor]  # (B,3,H,W)
+    factor: int  # K = identity (1) or area downsampling by `factor`
+    config: RestorerConfig
+    temperature: torch.Tensor  # scalar, positive
+    color_weight: torch.Tensor  # scalar, positive
+
+    def K(self, x):
+        return x if self.factor == 1 else F.avg_pool2d(x, self.factor)
+
+    def Kt(self, v):
+        if self.factor == 1:
+            return v
+        s = self.factor
+        return F.interpolate(v, scale_factor=s, mode="nearest") / (s * s)
+
+
+def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor) -> BlockMatches:
+    """Block matching on the current estimate; untrusted pixels masked out of the depth distance."""
+    c = ctx.config
+    trust = q if ctx.factor == 1 else None
+    with torch.no_grad():
+        return block_match(x.detach(), ctx.rgb, trust, block_size=c.block_size, search_window=c.search_window,
+                           k=c.k, color_weight=float(ctx.color_weight), temperature=float(ctx.temperature),
+                           include_self=c.include_self)
+
+
+def match_weights(matches: BlockMatches, ctx: RestorationContext) -> torch.Tensor:
+    """ω = softmax(−d/h) over the kept blocks, differentiable in the temperature h."""
+    return torch.softmax(-matches.dist / ctx.temperature, dim=1)
+
+
+class UnrolledLayer(nn.Module):
+    """One iteration; owns its positive parameters λ, η, γ, μ₁, μ₂ (softplus of raw values)."""
+
+    names = ("lam", "eta", "gamma", "mu1", "mu2")
+
+    def __init__(self, config: RestorerConfig, index: int, trainable: bool = False):
+        super().__init__()
+        self.index = index
+        for n in self.names:
+            raw = torch.tensor(_inv_softplus(getattr(config, n)), dtype=torch.float32)
+            self.register_parameter("raw_" + n, nn.Parameter(raw, requires_grad=trainable))
+
+    def value(self, name: str) -> torch.Tensor:
+        return F.softplus(getattr(self, "raw_" + name))
+
+    def values(self) -> dict:
+        return {n: float(self.value(n)) for n in self.names}
+
+    def forward(self, s: RestorationState, ctx: RestorationContext) -> RestorationState:
+        c = ctx.config
+        dt = s.x.dtype
+        lam, eta, gamma, mu1, mu2 = (self.value(n).to(dt) for n in self.names)
+        shrink = group_soft_threshold if c.isotropic else soft_threshold
+        dx = grad(s.x)  # (B,2,H,W)
+        z = shrink(dx, lam / mu1)
+        if c.use_nonlocal:
+            w = soft_threshold(dx - s.alpha, eta / mu2)
+        else:
+            w, mu2 = s.w, torch.zeros_like(mu2)
+        e = s.q * soft_threshold(ctx.y - ctx.K(s.x), gamma) if c.use_outliers else s.e
+        matches, alpha, q, conf = s.matches, s.alpha, s.q, s.confidence
+        if matches is not None and self.index in c.match_layers:
+            matches = run_block_matching(s.x, ctx, s.q)
+        if c.use_nonlocal:
+            alpha = nonlocal_gradient(dx, matches._replace(weight=match_weights(matches, ctx)))
+        if c.use_singular and ctx.factor == 1:
+            q, conf = singular_test(ctx, s.x, matches)
+        rhs = ctx.Kt(q * (ctx.y - e)) + mu1 * grad_adjoint(z)
+        if c.use_nonlocal:
+            rhs = rhs + mu2 * grad_adjoint(w + alpha)
+        x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations)
+        return replace(s, x=x, z=z, w=w, e=e, alpha=alpha, q=q, confidence=conf, matches=matches)
+
+    def extra_repr(self) -> str:
+        return f"index={self.index}, " + ", ".join(f"{k}={v:.3g}" for k, v in self.values().items())
+
+
+def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatches):
+    """Q and a soft confidence P(x_i) (0 at missing pixels) from the singular-pixel test."""
+    c = ctx.config
+    with torch.no_grad():
+        res = detect_singular(ctx.y, x.detach(), ctx.observed, matches, sigma_floor=c.singular_sigma_floor,
+                              tau=c.singular_tau, rounds=c.singular_rounds)
+    if isinstance(res, tuple):
+        q, conf = res[0], res[1]
+    else:
+        q, conf = res, res
+    return q.to(x.dtype), conf.to(x.dtype)
+
+
+def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
+            log: list) -> torch.Tensor:
+    """Solve (KᵀQK + μ DᵀD) x = rhs by preconditioned CG, warm-started at ``x0``."""
+    c = ctx.config
+    q = q.detach()
+
+    def apply_a(v, mu_=mu):
+        return ctx.Kt(q * ctx.K(v)) + mu_ * laplacian(v)
+
+    precond = None
+    if c.precondition:
+        a = q.flatten(1).mean(1) / (ctx.factor ** 2)  # (B,)
+        precond = NeumannPreconditioner(a.detach(), mu.detach())
+    res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=precond, tol=c.cg_tol, max_iter=c.cg_max_iter,
+                   implicit=c.implicit_backward, params=(mu,) if mu.requires_grad else ())
+    log.append(int(res.iterations.max()))
+    return res.x

@@ -1,0 +1,207 @@
+r"""The unrolled restorer: :class:`DepthRestorer` and its functional form :func:`restore_depth`.
+
+Objective (paper eq. 2-8, restored in model.md):
+
+.. math::
+    \min_{x,e}\ \tfrac12\|Q\odot(y-Kx-e)\|^2 + \lambda\|Dx\|_1 + \eta\|Dx-\alpha\|_1 + \gamma\|e\|_1
+
+solved by half-quadratic splitting, one :class:`~torch_depth_sr.layers.UnrolledLayer` per iteration.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, NamedTuple, Optional
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ._inputs import parse_depth, parse_rgb, restore_layout
+from .config import ABLATIONS, RestorerConfig
+from .errors import ShapeError
+from .fill import fill_holes
+from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching
+from .nonlocal_prior import nonlocal_gradient
+from .noise import depth_scale
+from .operators import grad
+
+
+class RestorationResult(NamedTuple):
+    """Result of :func:`restore_depth` with ``return_details=True``.
+
+    ``depth`` is in the input's units, layout and type. ``confidence`` (float in [0,1], on the
+    observation grid) is the singular-pixel test value P(x_i) at measured pixels and 0 where there
+    was no measurement; ``trusted`` is the binary Q; ``outliers`` the sparse residual e in depth
+    units. ``info`` holds the noise estimate, scale, CG iterations per layer and timings.
+    """
+
+    depth: Any
+    confidence: torch.Tensor
+    trusted: torch.Tensor
+    outliers: torch.Tensor
+    info: dict
+
+
+class DepthRestorer(nn.Module):
+    r"""Colour-guided depth restoration as an unrolled network of ``config.num_layers`` layers.
+
+    Frozen (``trainable=False``, the default) it is the paper's algorithm as a fixed
+    preprocessing stage and no parameter requires grad. Trainable, every layer's λ, η, γ, μ₁, μ₂,
+    the block-matching temperature ``h`` and colour weight ``ρ`` receive gradients.
+
+    Args:
+        config: a :class:`RestorerConfig` (defaults: the tuned frozen parameters).
+        trainable: whether the parameters require grad.
+        **overrides: fields of the config to change, e.g. ``num_layers=4`` or ``use_nonlocal=False``.
+
+    Examples:
+        >>> from torch_depth_sr.datasets.synthetic import make_scene
+        >>> s = make_scene(64, 80, seed=0)
+        >>> noisy = s["gt"] + 5 * torch.randn_like(s["gt"])
+        >>> out = DepthRestorer()(noisy.clamp_min(1)[None], s["rgb"][None])
+        >>> out.shape
+        torch.Size([1, 1, 64, 80])
+    """
+
+    def __init__(self, config: Optional[RestorerConfig] = None, trainable: bool = False, **overrides):
+        super().__init__()
+        config = (config or RestorerConfig()).replace(**overrides)
+        if config.num_layers < 1:
+            raise ValueError(f"num_layers must be >= 1; got {config.num_layers}.")
+        self.config = config
+        self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
+        self.log_temperature = nn.Parameter(torch.tensor(config.temperature).log(), requires_grad=trainable)
+        self.log_color_weight = nn.Parameter(torch.tensor(max(config.color_weight, 1e-8)).log(),
+                                             requires_grad=trainable)
+
+    @classmethod
+    def ablation(cls, name: str, **overrides) -> "DepthRestorer":
+        """``'tv'``, ``'tv+nl'`` or ``'full'``: the same model with terms switched off."""
+        if name not in ABLATIONS:
+            raise ValueError(f"unknown ablation {name!r}; allowed are {sorted(ABLATIONS)}.")
+        return cls(**{**ABLATIONS[name], **overrides})
+
+    def forward(self, depth, rgb=None, mask=None, noise_sigma=None, scale_factor: Optional[int] = None,
+                return_details: bool = False):
+        """Restore ``depth`` guided by ``rgb``; see :func:`restore_depth` for the arguments."""
+        dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
+        y, observed, layout = parse_depth(depth, mask, dtype)
+        y, observed = y.to(layout.device), observed.to(layout.device)
+        b, _, h, w = y.shape
+        guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
+        factor = _infer_factor(y, guide, scale_factor)
+        if guide is None and (self.config.use_nonlocal or self.config.use_singular):
+            guide = None  # depth-only block matching
+        bs = self.config.block_size
+        if min(h, w) * factor < bs:
+            raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
+                             f"{bs}x{bs}, the block size used by block matching.")
+        offset, scale, sigma = depth_scale(y, observed, noise_sigma)
+        o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
+        yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
+        grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
+        with torch.set_grad_enabled(grad_needed):
+            state, ctx = self._initial_state(yn, observed, guide, factor)
+            for layer in self.layers:
+                state = layer(state, ctx)
+        x = state.x * s4 + o4
+        out = restore_layout(x, layout)
+        if not return_details:
+            return out
+        info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
+                "cg_iterations": state.cg_iterations, "factor": factor}
+        return RestorationResult(out, state.confidence * observed, state.q, state.e * s4, info)
+
+    def _initial_state(self, yn, observed, guide, factor):
+        c = self.config
+        ctx = RestorationContext(y=yn, observed=observed, rgb=guide, factor=factor, config=c,
+                                 temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp())
+        x0 = fill_holes(yn, observed)
+        if factor > 1:
+            x0 = F.interpolate(x0, scale_factor=factor, mode="bicubic", align_corners=False)
+        b, _, hh, ww = x0.shape
+        zeros2 = x0.new_zeros(b, 2, hh, ww)
+        matches = None
+        alpha = zeros2
+        if c.use_nonlocal or (c.use_singular and factor == 1):
+            matches = run_block_matching(x0, ctx, observed)
+            if c.use_nonlocal:
+                alpha = nonlocal_gradient(grad(x0), matches._replace(weight=match_weights(matches, ctx)))
+        state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=observed,
+                                 confidence=observed, matches=matches, cg_iterations=[])
+        return state, ctx
+
+    # ---- parameters -------------------------------------------------------------------------
+    def layer_parameters(self) -> list[dict]:
+        """Each layer's positive parameter values, as floats."""
+        return [layer.values() for layer in self.layers]
+
+    def save(self, directory) -> None:
+        """Write ``config.json`` and ``state_dict.pt`` (tensors only; load with ``weights_only=True``)."""
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "config.json").write_text(self.config.to_json())
+        torch.save(self.state_dict(), d / "state_dict.pt")
+
+    @classmethod
+    def load(cls, directory, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
+        """Load what :meth:`save` wrote (never unpickles arbitrary objects)."""
+        d = Path(directory)
+        config = RestorerConfig.from_dict(json.loads((d / "config.json").read_text()))
+        model = cls(config, trainable=trainable)
+        state = torch.load(d / "state_dict.pt", map_location=map_location, weights_only=True)
+        model.load_state_dict(state)
+        return model
+
+
+def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:
+    h, w = y.shape[-2:]
+    if rgb is None:
+        if scale_factor not in (None, 1):
+            raise ShapeError("guided upsampling (scale_factor > 1) needs the high-resolution colour image.")
+        return 1
+    hh, ww = rgb.shape[-2:]
+    if scale_factor is None:
+        if (hh, ww) == (h, w):
+            return 1
+        if hh % h == 0 and ww % w == 0 and hh // h == ww // w:
+            return hh // h
+        raise ShapeError(f"depth is {h}x{w} and rgb is {hh}x{ww}; allowed are equal sizes (restoration) or rgb "
+                         "an integer multiple s of depth in both dims (guided upsampling by s). "
+                         "Crop or resize so the sizes match.")
+    s = int(scale_factor)
+    if (hh, ww) != (h * s, w * s):
+        raise ShapeError(f"scale_factor={s} needs rgb of size {h * s}x{w * s} for depth {h}x{w}; got rgb {hh}x{ww}.")
+    return s
+
+
+def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig] = None, noise_sigma=None,
+                  scale_factor: Optional[int] = None, return_details: bool = False, **overrides):
+    r"""Restore a depth map in one call (functional form of :class:`DepthRestorer`).
+
+    Args:
+        depth: ``(B,1,H,W)``, ``(1,H,W)`` or ``(H,W)``, torch or numpy, float or uint8/uint16,
+            any unit (disparity in pixels, millimetres, metres). 0 or NaN = no measurement.
+        rgb: aligned colour, ``(B,3,H,W)``/``(3,H,W)`` float in [0,1] or ``H×W×3`` uint8 numpy (RGB).
+            For guided upsampling it is ``s`` times larger than ``depth``.
+        mask: optional validity mask shaped like ``depth`` (nonzero = measured), combined with the
+            0/NaN rule.
+        config: a :class:`RestorerConfig`; ``**overrides`` change single fields.
+        noise_sigma: the noise std in depth units; estimated from the input when omitted.
+        scale_factor: guided upsampling factor; inferred from the sizes when omitted.
+        return_details: return a :class:`RestorationResult` with the confidence and outlier maps.
+
+    Returns:
+        The restored depth in the input's layout, type and units (uint16 in → uint16 out), or a
+        :class:`RestorationResult`.
+
+    Examples:
+        >>> import numpy as np
+        >>> d = np.full((40, 50), 1000, np.uint16); d[10:20, 10:20] = 0
+        >>> out = restore_depth(d, np.zeros((40, 50, 3), np.uint8))
+        >>> out.dtype, int(out.min()), int(out.max())
+        (dtype('uint16'), 1000, 1000)
+    """
+    return DepthRestorer(config, **overrides)(depth, rgb, mask=mask, noise_sigma=noise_sigma,
+                                               scale_factor=scale_factor, return_details=return_details)
