@@ -87,7 +87,8 @@ class DepthRestorer(nn.Module):
         """Restore ``depth`` guided by ``rgb``; see :func:`restore_depth` for the arguments."""
         dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
         y, observed, layout = parse_depth(depth, mask, dtype)
-        y, observed = y.to(layout.device), observed.to(layout.device)
+        dev = self.log_temperature.device  # compute where the model lives; the result goes back to the input's device
+        y, observed = y.to(dev), observed.to(dev)
         b, _, h, w = y.shape
         guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
         factor = _infer_factor(y, guide, scale_factor)

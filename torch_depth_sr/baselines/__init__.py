@@ -1,12 +1,26 @@
 """Classical baselines: joint bilateral filter/upsampling, sparse-coding denoising, bicubic."""
 from .bicubic import BicubicUpsample, bicubic_upsample
+from .dictionary import (
+    DictionaryDenoise,
+    OMPResult,
+    batched_omp,
+    dictionary_denoise,
+    estimate_noise_sigma,
+    overcomplete_dct_dictionary,
+)
 from .jbf import JointBilateralFilter, JointBilateralUpsample, joint_bilateral_filter, joint_bilateral_upsample
 
 __all__ = [
     "BicubicUpsample",
+    "DictionaryDenoise",
     "JointBilateralFilter",
     "JointBilateralUpsample",
+    "OMPResult",
+    "batched_omp",
     "bicubic_upsample",
+    "dictionary_denoise",
+    "estimate_noise_sigma",
     "joint_bilateral_filter",
     "joint_bilateral_upsample",
+    "overcomplete_dct_dictionary",
 ]

@@ -1,0 +1,149 @@
+import numpy as np
+import pytest
+import torch
+
+from torch_depth_sr import DepthRestorer, RestorerConfig, restore_depth
+
+
+def rmse(pred, gt, mask):
+    return float((((pred - gt) ** 2) * mask).sum() / mask.sum()) ** 0.5
+
+SMALL = dict(num_layers=3, search_window=9, k=4)
+
+
+class TestDepthRestorer:
+    def test_smoke_shapes_and_finite(self, scene):
+        out = DepthRestorer(**SMALL)(scene["depth"], scene["rgb"])
+        assert out.shape == scene["depth"].shape and out.dtype == torch.float32
+        assert torch.isfinite(out).all()
+
+    def test_improves_on_noisy_input(self, scene):
+        out = DepthRestorer()(scene["depth"], scene["rgb"])
+        filled_in = torch.where(scene["depth"] > 0, scene["depth"], out)
+        assert rmse(out, scene["gt"], scene["mask"]) < 0.8 * rmse(filled_in, scene["gt"], scene["mask"])
+
+    def test_default_has_eight_layers_and_frozen_has_no_grad(self):
+        m = DepthRestorer()
+        assert len(m.layers) == 8
+        assert not any(p.requires_grad for p in m.parameters())
+
+    def test_trainable_parameters_get_gradients(self, scene):
+        m = DepthRestorer(trainable=True, **SMALL)
+        out = m(scene["depth"], scene["rgb"])
+        loss = ((out - scene["gt"]) ** 2 * scene["mask"]).mean()
+        loss.backward()
+        names = {n for n, p in m.named_parameters() if p.requires_grad}
+        assert names == {n for n, _ in m.named_parameters()}
+        for layer in m.layers:
+            for n in ("lam", "eta", "gamma", "mu1", "mu2"):
+                g = getattr(layer, "raw_" + n).grad
+                assert g is not None and torch.isfinite(g), (layer.index, n)
+        assert m.log_temperature.grad is not None
+
+    def test_module_equals_functional(self, scene):
+        a = DepthRestorer(**SMALL)(scene["depth"], scene["rgb"])
+        b = restore_depth(scene["depth"], scene["rgb"], **SMALL)
+        torch.testing.assert_close(a, b)
+
+    def test_batched_equals_per_sample(self, scene):
+        d2 = torch.cat([scene["depth"], scene["depth"].flip(-1)])
+        c2 = torch.cat([scene["rgb"], scene["rgb"].flip(-1)])
+        m = DepthRestorer(**SMALL)
+        batched = m(d2, c2)
+        single = torch.cat([m(d2[i : i + 1], c2[i : i + 1]) for i in range(2)])
+        torch.testing.assert_close(batched, single, atol=1e-3, rtol=1e-4)
+
+    def test_inputs_not_modified(self, scene):
+        d, c = scene["depth"].clone(), scene["rgb"].clone()
+        d[0, 0, 0, 0] = float("nan")
+        d_copy = d.clone()
+        DepthRestorer(**SMALL)(d, c)
+        assert torch.equal(torch.isnan(d), torch.isnan(d_copy))
+        torch.testing.assert_close(torch.nan_to_num(d), torch.nan_to_num(d_copy))
+        torch.testing.assert_close(c, scene["rgb"])
+
+    def test_scale_equivariance(self, scene):
+        """One parameter set for any unit: restoring depth×1000 gives the result×1000."""
+        d = scene["depth"].double()
+        c = scene["rgb"].double()
+        m = DepthRestorer(**SMALL)
+        torch.testing.assert_close(m(d * 1000, c), m(d, c) * 1000, rtol=1e-6, atol=1e-6)
+
+    def test_ablations_share_code_path(self, scene):
+        tv = DepthRestorer.ablation("tv", **SMALL)
+        assert not tv.config.use_nonlocal and not tv.config.use_singular
+        assert torch.isfinite(tv(scene["depth"], scene["rgb"])).all()
+
+    def test_details(self, scene):
+        res = restore_depth(scene["depth"], scene["rgb"], return_details=True, **SMALL)
+        assert res.confidence.shape == scene["depth"].shape
+        assert (res.confidence[scene["depth"] == 0] == 0).all()
+        assert ((res.trusted == 0) | (res.trusted == 1)).all()
+        assert len(res.info["cg_iterations"]) == SMALL["num_layers"]
+
+    def test_save_load_roundtrip(self, tmp_path, scene):
+        m = DepthRestorer(**SMALL)
+        m.save(tmp_path)
+        m2 = DepthRestorer.load(tmp_path)
+        torch.testing.assert_close(m(scene["depth"], scene["rgb"]), m2(scene["depth"], scene["rgb"]))
+
+    def test_upsampling(self, scene):
+        gt = scene["gt"][..., :48, :64]
+        lr = torch.nn.functional.avg_pool2d(gt, 4)
+        out = restore_depth(lr, scene["rgb"], **SMALL)
+        assert out.shape == gt.shape and torch.isfinite(out).all()
+
+    def test_depth_only(self, scene):
+        out = restore_depth(scene["depth"], None, **SMALL)
+        assert torch.isfinite(out).all()
+
+
+class TestLayouts:
+    def test_numpy_uint16_millimetres(self, scene):
+        d = (scene["depth"][0, 0].numpy() * 10).astype(np.uint16)
+        rgb = (scene["rgb"][0].permute(1, 2, 0).numpy() * 255).astype(np.uint8)
+        out = restore_depth(d, rgb, **SMALL)
+        assert isinstance(out, np.ndarray) and out.dtype == np.uint16 and out.shape == d.shape
+        assert out.min() > 0
+
+    def test_nan_means_missing(self, scene):
+        d = scene["depth"].clone()
+        nan = torch.where(d == 0, torch.full_like(d, float("nan")), d)
+        torch.testing.assert_close(restore_depth(d, scene["rgb"], **SMALL), restore_depth(nan, scene["rgb"], **SMALL))
+
+    def test_explicit_mask(self, scene):
+        d = scene["depth"]
+        m = torch.ones_like(d)
+        m[..., :5, :5] = 0
+        d2 = d.clone()
+        d2[..., :5, :5] = 999.0  # hidden by the mask
+        torch.testing.assert_close(restore_depth(d, scene["rgb"], mask=m, **SMALL),
+                                   restore_depth(d2, scene["rgb"], mask=m, **SMALL))
+
+    @pytest.mark.parametrize("layout", ["hw", "1hw"])
+    def test_layout_kept(self, scene, layout):
+        d = scene["depth"][0, 0] if layout == "hw" else scene["depth"][0]
+        assert restore_depth(d, scene["rgb"][0], **SMALL).shape == d.shape
+
+
+class TestErrors:
+    @pytest.mark.parametrize(
+        "make, match",
+        [
+            (lambda s: (s["depth"][:, :, None], s["rgb"]), "depth must be"),
+            (lambda s: (torch.zeros(2, 3, 8, 8), s["rgb"]), "one channel"),
+            (lambda s: (s["depth"], s["rgb"][..., :40, :]), "rgb"),
+            (lambda s: (torch.zeros_like(s["depth"]), s["rgb"]), "no measured pixel"),
+            (lambda s: (s["depth"], s["rgb"] * float("nan")), "NaN or inf"),
+            (lambda s: (s["depth"], s["rgb"] * 255), r"\[0,1\]"),
+            (lambda s: (s["depth"][..., :3, :3], s["rgb"][..., :3, :3]), "block size"),
+            (lambda s: (-s["depth"] - 1, s["rgb"]), "negative"),
+            (lambda s: (s["depth"] + float("inf"), s["rgb"]), "inf"),
+            (lambda s: (s["depth"].to(torch.complex64), s["rgb"]), "dtype"),
+            (lambda s: ([[1.0]], s["rgb"]), "torch.Tensor or numpy"),
+        ],
+    )
+    def test_bad_input(self, scene, make, match):
+        d, c = make(scene)
+        with pytest.raises(ValueError, match=match):
+            restore_depth(d, c, **SMALL)

@@ -1,0 +1,60 @@
+"""The methods a benchmark compares, behind one call: ``run_method(name, sample) -> (1,1,H,W)``.
+
+Baseline parameters are the ones fitted on the Middlebury 2006 scenes (see ``tune.py`` and the
+README); the model's come from :class:`~torch_depth_sr.RestorerConfig` defaults, fitted the same way.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import torch
+
+from ..fill import fill_holes
+
+DENOISE_METHODS = ("input", "jbf", "dictionary", "tv", "tv+nl", "full")
+UPSAMPLE_METHODS = ("bicubic", "jbf", "tv", "tv+nl", "full")
+
+# Fitted on the 2006 scenes (tracks paper + sensor) by `python -m torch_depth_sr.evaluation.tune --method jbf`.
+JBF_PARAMS = dict(kernel_size=11, sigma_space=3.0, sigma_color=0.1)
+JBU_PARAMS = dict(sigma_space=1.0, sigma_color=0.1)
+DICTIONARY_PARAMS = dict(patch_size=8, n_atoms=128, stride=4)
+
+
+@lru_cache(maxsize=None)
+def _model(name: str, device: str):
+    from ..model import DepthRestorer
+
+    if name == "trained":
+        return DepthRestorer.from_pretrained("denoise").to(device)
+    if name == "trained-x4":
+        return DepthRestorer.from_pretrained("upsample-x4").to(device)
+    return DepthRestorer.ablation(name).to(device)
+
+
+def run_method(name: str, sample: dict, device: str = "cpu") -> torch.Tensor:
+    """Run ``name`` on a sample dict (``depth (1,h,w)``, ``rgb (3,H,W)``, optional ``factor``)."""
+    y = sample["depth"][None].to(device)
+    rgb = sample["rgb"][None].to(device)
+    factor = int(sample.get("factor", 1) or 1)
+    mask = (y > 0).float()
+    with torch.no_grad():
+        if name == "input":
+            return fill_holes(y, mask)
+        if name == "bicubic":
+            from ..baselines import bicubic_upsample
+
+            return bicubic_upsample(fill_holes(y, mask), factor)
+        if name == "jbf":
+            from ..baselines import joint_bilateral_filter, joint_bilateral_upsample
+
+            if factor > 1:
+                return joint_bilateral_upsample(y, rgb, factor, **JBU_PARAMS)
+            return joint_bilateral_filter(y, rgb, mask, **JBF_PARAMS)
+        if name == "dictionary":
+            from ..baselines import dictionary_denoise
+
+            return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
+        if name in ("tv", "tv+nl", "full", "trained", "trained-x4"):
+            return _model(name, device)(y, rgb)
+    raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
+                     "and 'trained'.")

@@ -1,0 +1,362 @@
+r"""Linear operators of the model: the discrete gradient ``D``, its adjoint ``Dᵀ``, the Neumann
+Laplacian ``DᵀD`` and the area-downsampling degradation ``K`` with its adjoint ``Kᵀ``.
+
+Every operator works on batched ``(B, C, H, W)`` tensors of any floating dtype and device, never
+modifies its input, and ships with its exact adjoint. :func:`dot_test` checks adjointness
+numerically:
+
+.. math::
+
+    \langle A u, v \rangle = \langle u, A^\top v \rangle .
+
+Functions hold the maths; the classes :class:`Gradient`, :class:`Identity` and
+:class:`AreaDownsample` only store settings and forward to them (``.forward``, ``.adjoint`` and
+``.normal`` = ``AᵀA``).
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import torch
+import torch.nn.functional as F
+
+from ._checks import check_4d, check_floating
+from .errors import DepthSRError, ShapeError
+
+__all__ = [
+    "AreaDownsample",
+    "Gradient",
+    "Identity",
+    "LinearOperator",
+    "area_downsample",
+    "area_downsample_adjoint",
+    "dot_test",
+    "grad",
+    "grad_adjoint",
+    "laplacian",
+]
+
+
+# --------------------------------------------------------------------------------------------
+# Gradient D, adjoint Dᵀ, Laplacian DᵀD (Neumann boundary)
+# --------------------------------------------------------------------------------------------
+def _grad(x: torch.Tensor) -> torch.Tensor:
+    dh = F.pad(x[..., :, 1:] - x[..., :, :-1], (0, 1))  # (B, C, H, W), last column 0
+    dv = F.pad(x[..., 1:, :] - x[..., :-1, :], (0, 0, 0, 1))  # (B, C, H, W), last row 0
+    return torch.cat([dh, dv], dim=1)  # (B, 2C, H, W)
+
+
+def _grad_adjoint(p: torch.Tensor) -> torch.Tensor:
+    c = p.shape[1] // 2
+    ph = p[:, :c, :, :-1]  # (B, C, H, W-1); the last column is never produced by D
+    pv = p[:, c:, :-1, :]  # (B, C, H-1, W)
+    # (Dhᵀ p)_j = p_{j-1} - p_j with p_{-1} = p_{W-1} = 0
+    return (F.pad(ph, (1, 0)) - F.pad(ph, (0, 1))) + (F.pad(pv, (0, 0, 1, 0)) - F.pad(pv, (0, 0, 0, 1)))
+
+
+def grad(x: torch.Tensor) -> torch.Tensor:
+    r"""Discrete gradient ``D``: forward differences with a Neumann (zero-flux) boundary.
+
+    .. math::
+
+        (D_h x)_{i,j} = x_{i,j+1} - x_{i,j}, \qquad (D_v x)_{i,j} = x_{i+1,j} - x_{i,j},
+
+    with ``(D_h x)_{i,W-1} = 0`` and ``(D_v x)_{H-1,j} = 0``.
+
+    Args:
+        x: image of shape ``(B, C, H, W)`` (the model uses ``C = 1``).
+
+    Returns:
+        ``(B, 2C, H, W)``: channels ``0..C-1`` are the horizontal differences, channels
+        ``C..2C-1`` the vertical ones (for ``C = 1``: channel 0 horizontal, channel 1 vertical).
+
+    Examples:
+        >>> x = torch.tensor([[[[0., 1., 3.], [2., 2., 2.]]]])
+        >>> grad(x)
+        tensor([[[[ 1.,  2.,  0.],
+                  [ 0.,  0.,  0.]],
+        <BLANKLINE>
+                 [[ 2.,  1., -1.],
+                  [ 0.,  0.,  0.]]]])
+    """
+    check_4d(x, "x")
+    check_floating(x, "x")
+    return _grad(x)
+
+
+def grad_adjoint(p: torch.Tensor) -> torch.Tensor:
+    r"""Exact adjoint ``Dᵀ`` of :func:`grad` (the negative divergence).
+
+    ``⟨D x, p⟩ = ⟨x, Dᵀ p⟩`` for all ``x, p``. Entries of ``p`` in the last column (horizontal part)
+    and last row (vertical part) do not influence the result, because ``D`` always writes 0 there.
+
+    Args:
+        p: field of shape ``(B, 2C, H, W)`` laid out like the output of :func:`grad`.
+
+    Returns:
+        ``(B, C, H, W)``.
+
+    Examples:
+        >>> x = torch.randn(2, 1, 5, 6, dtype=torch.float64)
+        >>> p = torch.randn(2, 2, 5, 6, dtype=torch.float64)
+        >>> bool(torch.isclose((grad(x) * p).sum(), (x * grad_adjoint(p)).sum()))
+        True
+    """
+    check_4d(p, "p")
+    check_floating(p, "p")
+    if p.shape[1] % 2 != 0:
+        raise ShapeError(
+            f"p must have an even number of channels (B,2C,H,W): C horizontal then C vertical differences, "
+            f"as returned by grad(); got shape {tuple(p.shape)}."
+        )
+    return _grad_adjoint(p)
+
+
+def _laplacian(x: torch.Tensor) -> torch.Tensor:
+    return _grad_adjoint(_grad(x))
+
+
+def laplacian(x: torch.Tensor) -> torch.Tensor:
+    r"""Neumann Laplacian ``DᵀD x`` (5-point stencil, positive semidefinite).
+
+    In the interior ``(DᵀD x)_{i,j} = 4 x_{i,j} - x_{i-1,j} - x_{i+1,j} - x_{i,j-1} - x_{i,j+1}``;
+    at the border only the neighbours inside the image count (the centre weight is their number).
+    Its null space is the constant images; its eigenvalues are
+    ``(2 - 2 cos(π k / H)) + (2 - 2 cos(π l / W))`` with DCT-II eigenvectors
+    (see :func:`torch_depth_sr.solvers.dct.solve_neumann`).
+
+    Args:
+        x: ``(B, C, H, W)``.
+
+    Returns:
+        ``(B, C, H, W)``.
+
+    Examples:
+        >>> x = torch.zeros(1, 1, 3, 3); x[0, 0, 1, 1] = 1.0
+        >>> laplacian(x)[0, 0]
+        tensor([[ 0., -1.,  0.],
+                [-1.,  4., -1.],
+                [ 0., -1.,  0.]])
+    """
+    check_4d(x, "x")
+    check_floating(x, "x")
+    return _laplacian(x)
+
+
+# --------------------------------------------------------------------------------------------
+# Area downsampling K and its adjoint Kᵀ
+# --------------------------------------------------------------------------------------------
+def _check_factor(s: int) -> int:
+    if isinstance(s, bool) or not isinstance(s, int) or s < 1:
+        raise DepthSRError(f"the downsampling factor s must be an int >= 1; got {s!r}.")
+    return s
+
+
+def area_downsample(x: torch.Tensor, s: int) -> torch.Tensor:
+    r"""Area downsampling ``K``: the mean of every non-overlapping ``s × s`` block.
+
+    .. math:: (K x)_{i,j} = \frac{1}{s^2} \sum_{a,b=0}^{s-1} x_{s i + a,\, s j + b}
+
+    Args:
+        x: high-resolution image ``(B, C, H, W)``; ``H`` and ``W`` must be divisible by ``s``.
+        s: integer factor ``>= 1``.
+
+    Returns:
+        ``(B, C, H / s, W / s)``.
+
+    Raises:
+        ShapeError: if ``H`` or ``W`` is not a multiple of ``s``.
+
+    Examples:
+        >>> area_downsample(torch.arange(16.).reshape(1, 1, 4, 4), 2)
+        tensor([[[[ 2.5000,  4.5000],
+                  [10.5000, 12.5000]]]])
+    """
+    check_4d(x, "x")
+    check_floating(x, "x")
+    s = _check_factor(s)
+    h, w = x.shape[-2:]
+    if h % s or w % s:
+        raise ShapeError(
+            f"area_downsample needs H and W divisible by s={s}; got x of shape {tuple(x.shape)}. "
+            f"Pad or crop the high-resolution grid to a multiple of s first."
+        )
+    if s == 1:
+        return x.clone()
+    return F.avg_pool2d(x, kernel_size=s, stride=s)  # (B, C, H/s, W/s)
+
+
+def area_downsample_adjoint(v: torch.Tensor, s: int) -> torch.Tensor:
+    r"""Exact adjoint ``Kᵀ`` of :func:`area_downsample`: replicate each pixel ``s × s`` times and
+    divide by ``s²``.
+
+    Note ``K Kᵀ = I / s²`` and ``KᵀK`` is the block-averaging projector divided by ``s²``.
+
+    Args:
+        v: low-resolution image ``(B, C, h, w)``.
+        s: integer factor ``>= 1``.
+
+    Returns:
+        ``(B, C, s h, s w)``.
+
+    Examples:
+        >>> area_downsample_adjoint(torch.tensor([[[[4.]]]]), 2)
+        tensor([[[[1., 1.],
+                  [1., 1.]]]])
+    """
+    check_4d(v, "v")
+    check_floating(v, "v")
+    s = _check_factor(s)
+    if s == 1:
+        return v.clone()
+    up = v.repeat_interleave(s, dim=-2).repeat_interleave(s, dim=-1)  # (B, C, s h, s w)
+    return up / (s * s)
+
+
+# --------------------------------------------------------------------------------------------
+# Operator classes
+# --------------------------------------------------------------------------------------------
+class LinearOperator:
+    """Base class: a linear map with ``forward``, ``adjoint`` and ``normal`` (``AᵀA``).
+
+    Calling the object applies ``forward``. Subclasses store settings only; the maths lives in
+    the module-level functions.
+    """
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def adjoint(self, v: torch.Tensor) -> torch.Tensor:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def normal(self, x: torch.Tensor) -> torch.Tensor:
+        """``AᵀA x``."""
+        return self.adjoint(self.forward(x))
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        return self.forward(x)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+
+class Gradient(LinearOperator):
+    """The discrete gradient ``D`` (:func:`grad`); ``adjoint`` is :func:`grad_adjoint` and
+    ``normal`` the Neumann Laplacian :func:`laplacian`.
+
+    Examples:
+        >>> D = Gradient()
+        >>> D(torch.zeros(2, 1, 4, 5)).shape
+        torch.Size([2, 2, 4, 5])
+        >>> dot_test(D, (2, 1, 4, 5), (2, 2, 4, 5)) < 1e-12
+        True
+    """
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return grad(x)
+
+    def adjoint(self, v: torch.Tensor) -> torch.Tensor:
+        return grad_adjoint(v)
+
+    def normal(self, x: torch.Tensor) -> torch.Tensor:
+        return laplacian(x)
+
+
+class Identity(LinearOperator):
+    """The identity ``K = I`` (denoising, the paper's setting). Returns its input unchanged
+    (the same tensor object, no copy).
+
+    Examples:
+        >>> x = torch.ones(1, 1, 2, 2)
+        >>> Identity()(x) is x
+        True
+    """
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return x
+
+    def adjoint(self, v: torch.Tensor) -> torch.Tensor:
+        return v
+
+    def normal(self, x: torch.Tensor) -> torch.Tensor:
+        return x
+
+
+class AreaDownsample(LinearOperator):
+    """Area downsampling by an integer factor ``s`` (:func:`area_downsample`), the degradation
+    ``K`` of guided super-resolution; ``adjoint`` is :func:`area_downsample_adjoint`.
+
+    Args:
+        s: integer factor ``>= 1``.
+
+    Examples:
+        >>> K = AreaDownsample(2)
+        >>> K(torch.ones(1, 1, 4, 6)).shape
+        torch.Size([1, 1, 2, 3])
+        >>> dot_test(K, (1, 1, 4, 6), (1, 1, 2, 3)) < 1e-12
+        True
+    """
+
+    def __init__(self, s: int) -> None:
+        self.s = _check_factor(s)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return area_downsample(x, self.s)
+
+    def adjoint(self, v: torch.Tensor) -> torch.Tensor:
+        return area_downsample_adjoint(v, self.s)
+
+    def __repr__(self) -> str:
+        return f"AreaDownsample(s={self.s})"
+
+
+def dot_test(
+    op: LinearOperator,
+    x_shape: Sequence[int],
+    y_shape: Sequence[int],
+    dtype: torch.dtype = torch.float64,
+    device: torch.device | str | None = None,
+    generator: torch.Generator | None = None,
+) -> float:
+    r"""Dot test of an operator against its adjoint.
+
+    Draws random ``u`` of shape ``x_shape`` and ``v`` of shape ``y_shape`` and returns the relative
+    discrepancy
+
+    .. math:: \frac{|\langle A u, v\rangle - \langle u, A^\top v\rangle|}
+                   {\max(|\langle A u, v\rangle|, |\langle u, A^\top v\rangle|, \epsilon)} .
+
+    A correct adjoint gives about machine precision (``< 1e-12`` in float64).
+
+    Args:
+        op: object with ``forward`` and ``adjoint``.
+        x_shape: input shape of ``op.forward``.
+        y_shape: output shape of ``op.forward`` (input shape of ``op.adjoint``).
+        dtype: floating dtype of the random vectors (float64 for tight tolerances).
+        device: device of the random vectors (default CPU).
+        generator: optional CPU ``torch.Generator`` for reproducibility.
+
+    Returns:
+        the relative discrepancy as a Python float.
+
+    Raises:
+        ShapeError: if ``op.forward`` / ``op.adjoint`` do not produce ``y_shape`` / ``x_shape``.
+
+    Examples:
+        >>> dot_test(Gradient(), (1, 1, 8, 8), (1, 2, 8, 8)) < 1e-12
+        True
+    """
+    u = torch.randn(tuple(x_shape), dtype=dtype, generator=generator).to(device)
+    v = torch.randn(tuple(y_shape), dtype=dtype, generator=generator).to(device)
+    au = op.forward(u)
+    atv = op.adjoint(v)
+    if tuple(au.shape) != tuple(y_shape):
+        raise ShapeError(f"{op!r}.forward maps {tuple(x_shape)} to {tuple(au.shape)}, not to y_shape {tuple(y_shape)}.")
+    if tuple(atv.shape) != tuple(x_shape):
+        raise ShapeError(
+            f"{op!r}.adjoint maps {tuple(y_shape)} to {tuple(atv.shape)}, not to x_shape {tuple(x_shape)}."
+        )
+    lhs = (au * v).sum().item()
+    rhs = (u * atv).sum().item()
+    eps = torch.finfo(dtype).tiny
+    return abs(lhs - rhs) / max(abs(lhs), abs(rhs), eps)

@@ -1,0 +1,125 @@
+"""Singular-pixel detection (paper eq. 2-5): is ``y_i`` plausible given its similar blocks?
+
+For pixel ``i`` with matched centres ``j_1 … j_k`` and weights ``ω_{i m}``, restricted to the
+currently credible centres (``Q_j = 1``) and renormalised,
+
+.. math::
+
+    \\tilde\\omega_{i m} = \\frac{\\omega_{i m} Q_{j_m}}{\\sum_{m'} \\omega_{i m'} Q_{j_{m'}}}, \\qquad
+    \\mu_i = \\sum_m \\tilde\\omega_{i m} x_{j_m}, \\qquad
+    \\sigma_i^2 = \\sum_m \\tilde\\omega_{i m} (x_{j_m} - \\mu_i)^2,
+
+    \\sigma_i \\leftarrow \\max(\\sigma_i, \\sigma_{floor}), \\qquad
+    P_i = \\exp\\Big(-\\frac{(y_i - \\mu_i)^2}{2\\sigma_i^2}\\Big), \\qquad
+    Q_i = [P_i \\ge \\tau] \\cdot \\text{observed}_i .
+
+The unnormalised Gaussian kernel is the reference reading (the paper's normalised density would mark
+every pixel singular for ``σ > 0.4``); the floor ``σ_floor`` (the noise level) keeps flat regions from
+marking every noisy pixel singular. The test is repeated: pixels found singular leave the statistics,
+``μ, σ`` are recomputed, and so on for ``rounds`` rounds or until ``Q`` stops changing. Where no
+matched centre is credible, the statistics use all ``k`` centres with their original weights.
+"""
+from __future__ import annotations
+
+from typing import Tuple, Union
+
+import torch
+
+from ._checks import check_4d, check_same_hw
+from .block_matching import BlockMatches, gather_neighbors
+from .errors import DepthSRError, ShapeError
+
+__all__ = ["detect_singular"]
+
+
+def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
+    if isinstance(value, torch.Tensor):
+        if value.numel() not in (1, b) or value.ndim > 1:
+            raise ShapeError(f"{name} must be a float or a ({b},) tensor; got shape {tuple(value.shape)}.")
+        v = value.detach().to(like).reshape(-1).expand(b) if value.numel() == 1 else value.detach().to(like)
+    else:
+        v = torch.full((b,), float(value), dtype=like.dtype, device=like.device)
+    if bool((~torch.isfinite(v) | (v <= 0)).any()):
+        raise DepthSRError(f"{name} must be finite and > 0; got {v.tolist()}.")
+    return v.view(b, 1, 1, 1)
+
+
+def detect_singular(
+    y: torch.Tensor,
+    x: torch.Tensor,
+    observed: torch.Tensor,
+    matches: BlockMatches,
+    sigma_floor: Union[float, torch.Tensor],
+    tau: float = 0.5,
+    rounds: int = 3,
+    *,
+    return_confidence: bool = False,
+) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
+    """Credibility mask ``Q`` (1 = credible, 0 = singular or missing) from the matched blocks.
+
+    Args:
+        y: ``(B, 1, H, W)`` observed depth (missing pixels may hold anything, NaN included).
+        x: ``(B, 1, H, W)`` current estimate (defined everywhere); ``μ, σ`` come from it.
+        observed: ``(B, 1, H, W)`` {0, 1} (or bool) mask of measured pixels; 0 → ``Q = 0`` always.
+            NaN/inf values of ``y`` are treated as missing too.
+        matches: :class:`~torch_depth_sr.block_matching.BlockMatches` of ``x`` (``(B, k, H, W)``).
+        sigma_floor: ``σ_floor > 0``, float or ``(B,)`` tensor, in the units of ``y`` (the noise level).
+        tau: threshold on ``P`` in ``(0, 1]`` (0.5, i.e. ``|y − μ| ≤ 1.177 σ``).
+        rounds: maximum number of test rounds (≥ 1); stops early when ``Q`` stops changing.
+        return_confidence: also return the soft confidence ``P`` (0 at missing pixels).
+
+    Returns:
+        ``Q`` ``(B, 1, H, W)`` float {0, 1} in ``y``'s dtype, no gradient; with
+        ``return_confidence=True`` the tuple ``(Q, P)``.
+
+    Examples:
+        >>> from torch_depth_sr.block_matching import block_match
+        >>> g = torch.Generator().manual_seed(0)
+        >>> x = torch.linspace(0, 10, 24).view(1, 1, 1, 24).expand(1, 1, 24, 24).contiguous()
+        >>> y = x + 0.1 * torch.randn(x.shape, generator=g)
+        >>> y[0, 0, 12, 12] += 5.0  # an impulse
+        >>> m = block_match(x, None, None, block_size=5, search_window=11, k=8)
+        >>> q = detect_singular(y, x, torch.ones_like(y), m, sigma_floor=0.3)
+        >>> float(q[0, 0, 12, 12]), float(q.mean()) > 0.95
+        (0.0, True)
+    """
+    check_4d(y, "y", channels=1)
+    check_4d(x, "x", channels=1)
+    check_4d(observed, "observed", channels=1)
+    check_same_hw(y, x, "y", "x")
+    check_same_hw(y, observed, "y", "observed")
+    if matches.index.shape[0] != y.shape[0] or matches.index.shape[-2:] != y.shape[-2:]:
+        raise ShapeError(f"matches {tuple(matches.index.shape)} must share batch size and height/width with "
+                         f"y {tuple(y.shape)}; run block matching on this image.")
+    if not 0.0 < float(tau) <= 1.0:
+        raise DepthSRError(f"tau must be in (0, 1]; got {tau!r}.")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise DepthSRError(f"rounds must be an int >= 1; got {rounds!r}.")
+    b = y.shape[0]
+    with torch.no_grad():
+        dt = y.dtype if y.is_floating_point() else torch.float32
+        yv = y.detach().to(dt)
+        xv = x.detach().to(dt)
+        floor = _as_batch(sigma_floor, "sigma_floor", b, yv)
+        obs = (observed.detach() > 0) & torch.isfinite(yv)  # (B,1,H,W) bool
+        y0 = torch.where(obs, yv, torch.zeros_like(yv))
+        xj = gather_neighbors(xv, matches.index)[:, 0]  # (B, k, H, W)
+        w0 = matches.weight.detach().to(dt)  # (B, k, H, W)
+        q = obs.clone()
+        p = torch.zeros_like(yv)
+        for _ in range(rounds):
+            qj = gather_neighbors(q.to(dt), matches.index)[:, 0]  # (B, k, H, W)
+            w = w0 * qj
+            s = w.sum(dim=1, keepdim=True)  # (B, 1, H, W)
+            w = torch.where(s > 0, w / s.clamp_min(torch.finfo(dt).tiny), w0)
+            mu = (w * xj).sum(dim=1, keepdim=True)  # (B, 1, H, W)
+            var = (w * (xj - mu) ** 2).sum(dim=1, keepdim=True)
+            sigma = torch.maximum(var.clamp_min(0).sqrt(), floor)
+            p = torch.exp(-((y0 - mu) ** 2) / (2 * sigma**2)) * obs
+            q_new = (p >= tau) & obs
+            changed = bool((q_new != q).any())
+            q = q_new
+            if not changed:
+                break
+        qf = q.to(dt)
+    return (qf, p) if return_confidence else qf
