@@ -405,15 +405,19 @@ def _block_match_numpy(depth, rgb, trust, block_size, search_window, k, rho, inc
 _C_TEMPLATE = r"""
 static void insert_SFX(REAL v, int32_t id, REAL* td, int32_t* ti, int k) {
     int m = k - 1;
-    while (m > 0 && td[m - 1] > v) { td[m] = td[m - 1]; ti[m] = ti[m - 1]; --m; }
+    while (m > 0 && (td[m - 1] > v || (td[m - 1] == v && ti[m - 1] > id))) {
+        td[m] = td[m - 1]; ti[m] = ti[m - 1]; --m;
+    }
     td[m] = v; ti[m] = id;
 }
 
 /* Running top-k over the search window for image rows [h0, h1) of one sample.
    xp, tp, cp: planes padded by r (replicate) then R (zeros), row stride Wp; tp/cp may be NULL.
-   Offsets are visited in increasing id (dy+R)*S + (dx+R); a strict '<' keeps the smaller id on ties. */
+   order: the no offset ids (dy+R)*S + (dx+R) to visit (centre first, so that the running k-th
+   distance is tight early and few candidates need an insertion). Keys are compared as
+   (distance, id), so ties go to the smaller id whatever the visiting order. */
 int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t Hp, int64_t Wp,
-                int H, int W, int r, int R, int stride, int k, double rho, int include_self,
+                int H, int W, int r, int R, const int32_t* order, int no, int k, double rho,
                 int h0, int h1, REAL* topd, int32_t* topi)
 {
     const int bs = 2 * r + 1, S = 2 * R + 1, U = W + 2 * r, rows = h1 - h0;
@@ -422,17 +426,16 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
     const REAL crho = nc > 0 ? (REAL)(rho / (nc * (double)bs * bs)) : 0;
     const int nbuf = tp ? 3 : 1;
     REAL* ring = (REAL*)malloc(sizeof(REAL) * (size_t)nbuf * bs * U);
-    REAL* col = (REAL*)malloc(sizeof(REAL) * (size_t)nbuf * U);
+    REAL* col = (REAL*)malloc(sizeof(REAL) * (size_t)(nbuf + 1) * U);
     if (!ring || !col) { free(ring); free(col); return -1; }
-    for (int64_t p = 0; p < (int64_t)rows * W * k; ++p) { topd[p] = (REAL)INFINITY; topi[p] = -1; }
-    for (int dy = -R; dy <= R; ++dy) {
-        if (((dy % stride) + stride) % stride) continue;
+    REAL* dd = col + (size_t)nbuf * U;
+    for (int64_t p = 0; p < (int64_t)rows * W * k; ++p) { topd[p] = (REAL)INFINITY; topi[p] = 0x7fffffff; }
+    for (int io = 0; io < no; ++io) {
+        const int32_t oid = order[io];
+        const int dy = oid / S - R, dx = oid % S - R;
         const int i0 = h0 > -dy ? h0 : -dy, i1 = h1 < H - dy ? h1 : H - dy;
         if (i1 <= i0) continue;
-        for (int dx = -R; dx <= R; ++dx) {
-            if (((dx % stride) + stride) % stride) continue;
-            if (dy == 0 && dx == 0 && !include_self) continue;
-            const int32_t oid = (dy + R) * S + (dx + R);
+        {
             const int j0 = dx < 0 ? -dx : 0, j1 = dx > 0 ? W - dx : W;
             for (int t = i0; t < i1 + 2 * r; ++t) {
                 const int slot = t % bs;
@@ -472,17 +475,26 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
                 }
                 REAL* td = topd + (int64_t)(i - h0) * W * k;
                 int32_t* ti = topi + (int64_t)(i - h0) * W * k;
-                for (int j = j0; j < j1; ++j) {
-                    REAL s0 = 0, d;
-                    for (int q = 0; q < bs; ++q) s0 += col[j + q];
-                    if (!tp) {
-                        d = s0 / nb;
-                    } else {
-                        REAL s1 = 0, s2 = 0;
-                        for (int q = 0; q < bs; ++q) { s1 += col[U + j + q]; s2 += col[2 * U + j + q]; }
-                        d = s0 / (s1 > 1 ? s1 : 1) + crho * s2;
+                for (int j = j0; j < j1; ++j) dd[j] = col[j];
+                for (int q = 1; q < bs; ++q)
+                    for (int j = j0; j < j1; ++j) dd[j] += col[j + q];
+                if (!tp) {
+                    const REAL inb = 1 / nb;
+                    for (int j = j0; j < j1; ++j) dd[j] *= inb;
+                } else {
+                    const REAL* c1 = col + U;
+                    const REAL* c2 = col + 2 * U;
+                    for (int j = j0; j < j1; ++j) {
+                        REAL s1 = c1[j], s2 = c2[j];
+                        for (int q = 1; q < bs; ++q) { s1 += c1[j + q]; s2 += c2[j + q]; }
+                        dd[j] = dd[j] / (s1 > 1 ? s1 : 1) + crho * s2;
                     }
-                    if (d < td[(int64_t)j * k + k - 1]) insert_SFX(d, oid, td + (int64_t)j * k, ti + (int64_t)j * k, k);
+                }
+                for (int j = j0; j < j1; ++j) {
+                    const REAL d = dd[j] > 0 ? dd[j] : 0;
+                    REAL* tdj = td + (int64_t)j * k;
+                    int32_t* tij = ti + (int64_t)j * k;
+                    if (d < tdj[k - 1] || (d == tdj[k - 1] && oid < tij[k - 1])) insert_SFX(d, oid, tdj, tij, k);
                 }
             }
         }
@@ -548,9 +560,18 @@ def _load_clib():
     for name in ("bm_rows_f32", "bm_rows_f64"):
         fn = getattr(lib, name)
         fn.restype = i32
-        fn.argtypes = [vp, vp, vp, i32, i64, i64, i32, i32, i32, i32, i32, i32, dbl, i32, i32, i32, vp, vp]
+        fn.argtypes = [vp, vp, vp, i32, i64, i64, i32, i32, i32, i32, vp, i32, i32, dbl, i32, i32, vp, vp]
     _CLIB = lib
     return lib
+
+
+def _offset_order(search_window: int, stride: int, include_self: bool) -> np.ndarray:
+    """Offset ids of the lattice, nearest to the centre first (ties by id)."""
+    big_r = search_window // 2
+    offs = [((dy * dy + dx * dx), (dy + big_r) * search_window + dx + big_r)
+            for dy in _lattice(big_r, stride) for dx in _lattice(big_r, stride)
+            if include_self or dy != 0 or dx != 0]
+    return np.array([o for _, o in sorted(offs)], dtype=np.int32)
 
 
 def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride):
@@ -572,6 +593,7 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
         for h0 in range(0, h, chunk_rows):
             jobs.append((b, h0, min(h, h0 + chunk_rows)))
     topd = np.empty((bsz, h * w, k), dtype=npdt)
+    order = _offset_order(search_window, stride, include_self)
     topi = np.empty((bsz, h * w, k), dtype=np.int32)
 
     def run(job):
@@ -579,8 +601,8 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
         xp, tp, cp, rb = samples[b]
         td, ti = topd[b, h0 * w:h1 * w], topi[b, h0 * w:h1 * w]
         rc = fn(xp.ctypes.data, None if tp is None else tp.ctypes.data, None if cp is None else cp.ctypes.data,
-                0 if cp is None else cp.shape[0], xp.shape[0], xp.shape[1], h, w, r, big_r, stride, k, rb,
-                int(include_self), h0, h1, td.ctypes.data, ti.ctypes.data)
+                0 if cp is None else cp.shape[0], xp.shape[0], xp.shape[1], h, w, r, big_r, order.ctypes.data,
+                len(order), k, rb, h0, h1, td.ctypes.data, ti.ctypes.data)
         if rc != 0:
             raise MemoryError("block matching kernel could not allocate its row buffers")
 

@@ -16,6 +16,8 @@ ablations (TV only, TV + nonlocal) run through this same code.
 """
 from __future__ import annotations
 
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from typing import Optional
 
@@ -51,6 +53,19 @@ class RestorationState:
     confidence: torch.Tensor  # (B,1,h,w) in [0,1]
     matches: Optional[BlockMatches]
     cg_iterations: list
+    timings: dict  # seconds per stage, accumulated over layers
+
+
+@contextmanager
+def stage(timings: dict, name: str, device: torch.device):
+    """Accumulate the wall time of a stage (synchronising CUDA so the time is real)."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    t0 = time.perf_counter()
+    yield
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
 
 @dataclass
@@ -121,16 +136,20 @@ class UnrolledLayer(nn.Module):
             w, mu2 = s.w, torch.zeros_like(mu2)
         e = s.q * soft_threshold(ctx.y - ctx.K(s.x), gamma) if c.use_outliers else s.e
         matches, alpha, q, conf = s.matches, s.alpha, s.q, s.confidence
+        dev = s.x.device
         if matches is not None and self.index in c.match_layers:
-            matches = run_block_matching(s.x, ctx, s.q)
+            with stage(s.timings, "block_matching", dev):
+                matches = run_block_matching(s.x, ctx, s.q)
         if c.use_nonlocal:
             alpha = nonlocal_gradient(dx, matches._replace(weight=match_weights(matches, ctx)))
         if c.use_singular and ctx.factor == 1:
-            q, conf = singular_test(ctx, s.x, matches)
+            with stage(s.timings, "singular", dev):
+                q, conf = singular_test(ctx, s.x, matches)
         rhs = ctx.Kt(q * (ctx.y - e)) + mu1 * grad_adjoint(z)
         if c.use_nonlocal:
             rhs = rhs + mu2 * grad_adjoint(w + alpha)
-        x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations)
+        with stage(s.timings, "cg", dev):
+            x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations)
         return replace(s, x=x, z=z, w=w, e=e, alpha=alpha, q=q, confidence=conf, matches=matches)
 
     def extra_repr(self) -> str:

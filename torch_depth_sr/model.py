@@ -10,6 +10,7 @@ solved by half-quadratic splitting, one :class:`~torch_depth_sr.layers.UnrolledL
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any, NamedTuple, Optional
 
@@ -21,7 +22,7 @@ from ._inputs import parse_depth, parse_rgb, restore_layout
 from .config import ABLATIONS, RestorerConfig
 from .errors import ShapeError
 from .fill import fill_holes
-from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching
+from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, stage
 from .nonlocal_prior import nonlocal_gradient
 from .noise import depth_scale
 from .operators import grad
@@ -102,16 +103,20 @@ class DepthRestorer(nn.Module):
         o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
         yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
         grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
+        t0 = time.perf_counter()
         with torch.set_grad_enabled(grad_needed):
             state, ctx = self._initial_state(yn, observed, guide, factor)
             for layer in self.layers:
                 state = layer(state, ctx)
+        if state.x.device.type == "cuda":
+            torch.cuda.synchronize(state.x.device)
+        state.timings["total"] = time.perf_counter() - t0
         x = state.x * s4 + o4
         out = restore_layout(x, layout)
         if not return_details:
             return out
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
-                "cg_iterations": state.cg_iterations, "factor": factor}
+                "cg_iterations": state.cg_iterations, "factor": factor, "seconds": dict(state.timings)}
         return RestorationResult(out, state.confidence * observed, state.q, state.e * s4, info)
 
     def _initial_state(self, yn, observed, guide, factor):
@@ -125,12 +130,14 @@ class DepthRestorer(nn.Module):
         zeros2 = x0.new_zeros(b, 2, hh, ww)
         matches = None
         alpha = zeros2
+        timings: dict = {}
         if c.use_nonlocal or (c.use_singular and factor == 1):
-            matches = run_block_matching(x0, ctx, observed)
+            with stage(timings, "block_matching", x0.device):
+                matches = run_block_matching(x0, ctx, observed)
             if c.use_nonlocal:
                 alpha = nonlocal_gradient(grad(x0), matches._replace(weight=match_weights(matches, ctx)))
         state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=observed,
-                                 confidence=observed, matches=matches, cg_iterations=[])
+                                 confidence=observed, matches=matches, cg_iterations=[], timings=timings)
         return state, ctx
 
     # ---- parameters -------------------------------------------------------------------------

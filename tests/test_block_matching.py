@@ -1,0 +1,239 @@
+"""Block matching: fast paths against the unfold reference, contracts, errors."""
+import itertools
+
+import numpy as np
+import pytest
+import torch
+
+from torch_depth_sr.block_matching import (BlockMatches, _load_clib, block_match, block_match_reference,
+                                           gather_neighbors)
+from torch_depth_sr.errors import DepthSRError, ShapeError
+
+BACKENDS = ["numpy", "torch"] + (["c"] if _load_clib() is not None else [])
+
+
+def _inputs(b=2, h=11, w=14, dtype=torch.float32, rgb=True, trust=True, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    x = (torch.rand(b, 1, h, w, generator=g) * 4).to(dtype)
+    c = torch.rand(b, 3, h, w, generator=g).to(dtype) if rgb else None
+    t = (torch.rand(b, 1, h, w, generator=g) > 0.25).to(dtype) if trust else None
+    return x, c, t
+
+
+def assert_same_matches(a: BlockMatches, r: BlockMatches, tol: float):
+    """Sorted distances agree; indices agree wherever the distance is not (near-)tied."""
+    assert a.dist.shape == r.dist.shape == a.index.shape == r.index.shape
+    torch.testing.assert_close(a.dist, r.dist, rtol=tol, atol=tol)
+    d = r.dist
+    gap = torch.full_like(d, float("inf"))
+    diff = (d[:, 1:] - d[:, :-1]).abs()
+    gap[:, 1:] = torch.minimum(gap[:, 1:], diff)
+    gap[:, :-1] = torch.minimum(gap[:, :-1], diff)
+    distinct = gap > 10 * tol * (1 + d.abs())
+    assert distinct.float().mean() > 0.5
+    assert torch.equal(a.index[distinct], r.index[distinct])
+    torch.testing.assert_close(a.weight, r.weight, rtol=10 * tol, atol=10 * tol)
+
+
+class TestBlockMatchAgainstReference:
+    @pytest.mark.parametrize("backend", BACKENDS)
+    @pytest.mark.parametrize("include_self,rgb,trust,dtype,stride",
+                             [(False, True, True, torch.float32, 1), (True, False, False, torch.float32, 1),
+                              (False, False, True, torch.float64, 1), (True, True, False, torch.float64, 1),
+                              (False, True, True, torch.float64, 2), (True, True, True, torch.float32, 2)])
+    def test_product(self, backend, include_self, rgb, trust, dtype, stride):
+        x, c, t = _inputs(dtype=dtype, rgb=rgb, trust=trust)
+        kw = dict(block_size=3, search_window=7 if stride == 1 else 9, k=5, color_weight=0.7, temperature=0.3,
+                  include_self=include_self, search_stride=stride)
+        ref = block_match_reference(x, c, t, **kw)
+        fast = block_match(x, c, t, chunk_rows=4, backend=backend, **kw)
+        assert_same_matches(fast, ref, 1e-5 if dtype == torch.float32 else 1e-10)
+
+    @pytest.mark.parametrize("backend", ["auto"] + BACKENDS)
+    def test_default_sizes(self, backend):
+        x, c, t = _inputs(b=1, h=22, w=25, seed=1)
+        ref = block_match_reference(x, c, t, color_weight=2.0)
+        fast = block_match(x, c, t, color_weight=2.0, backend=backend)
+        assert fast.dist.shape == (1, 10, 22, 25)
+        assert_same_matches(fast, ref, 1e-5)
+
+    @pytest.mark.parametrize("backend", BACKENDS)
+    def test_chunking_does_not_change_result(self, backend):
+        x, c, t = _inputs(b=1, h=17, w=9)
+        kw = dict(block_size=5, search_window=9, k=7, backend=backend)
+        a = block_match(x, c, t, chunk_rows=1, **kw)
+        b = block_match(x, c, t, chunk_rows=100, **kw)
+        torch.testing.assert_close(a.dist, b.dist, rtol=1e-6, atol=1e-6)
+
+
+class TestBlockMatchContract:
+    @pytest.mark.parametrize("backend", BACKENDS)
+    def test_batched_equals_per_sample(self, backend):
+        x, c, t = _inputs(b=3)
+        kw = dict(block_size=3, search_window=7, k=4, color_weight=torch.tensor([0.5, 1.0, 2.0]),
+                  temperature=torch.tensor([0.5, 1.0, 2.0]), backend=backend)
+        full = block_match(x, c, t, **kw)
+        for i in range(3):
+            kwi = dict(kw, color_weight=kw["color_weight"][i].item(), temperature=kw["temperature"][i].item())
+            one = block_match(x[i:i + 1], c[i:i + 1], t[i:i + 1], **kwi)
+            torch.testing.assert_close(full.dist[i:i + 1], one.dist)
+            assert torch.equal(full.index[i:i + 1], one.index)
+            torch.testing.assert_close(full.weight[i:i + 1], one.weight)
+
+    def test_outputs_no_grad_sorted_weights_sum_to_one(self):
+        x, c, t = _inputs()
+        x.requires_grad_(True)
+        m = block_match(x, c, t, block_size=3, search_window=7, k=5)
+        assert isinstance(m, BlockMatches)
+        assert m.index.dtype == torch.int64 and not m.index.requires_grad
+        assert not m.dist.requires_grad and not m.weight.requires_grad
+        assert m.dist.dtype == x.dtype
+        assert (m.dist[:, 1:] >= m.dist[:, :-1]).all()
+        torch.testing.assert_close(m.weight.sum(1), torch.ones_like(m.weight[:, 0]))
+        assert x.grad is None
+
+    def test_candidates_in_window_and_image(self):
+        x, c, t = _inputs(b=1, h=12, w=13)
+        m = block_match(x, c, t, block_size=3, search_window=5, k=8)  # corner has exactly 8 candidates
+        idx = m.index[0]
+        iy, ix = torch.div(idx, 13, rounding_mode="floor"), idx % 13
+        gy = torch.arange(12).view(1, 12, 1)
+        gx = torch.arange(13).view(1, 1, 13)
+        assert ((iy - gy).abs() <= 2).all() and ((ix - gx).abs() <= 2).all()
+        assert ((iy != gy) | (ix != gx)).all()  # include_self=False never picks the centre
+        assert torch.isfinite(m.dist).all()
+        # the 8 picks at a pixel are distinct
+        assert (idx.sort(0).values.diff(dim=0) > 0).all()
+
+    def test_include_self_first_with_zero_distance(self):
+        x, c, _ = _inputs(b=1)
+        m = block_match(x, c, None, block_size=3, search_window=7, k=3, include_self=True)
+        assert (m.dist[:, 0] == 0).all()
+        flat = torch.arange(11 * 14).view(1, 11, 14)
+        assert torch.equal(m.index[:, 0], flat)
+
+    @pytest.mark.parametrize("backend", BACKENDS)
+    def test_planted_duplicate_is_found(self, backend):
+        g = torch.Generator().manual_seed(5)
+        x = torch.rand(1, 1, 30, 30, generator=g) * 10
+        c = torch.rand(1, 3, 30, 30, generator=g)
+        # copy the 5x5 block around (20, 22) to around (15, 15): offset (5, 7) is inside a 21 window
+        x[..., 13:18, 13:18] = x[..., 18:23, 20:25]
+        c[..., 13:18, 13:18] = c[..., 18:23, 20:25]
+        m = block_match(x, c, None, block_size=5, search_window=21, k=3, backend=backend)
+        assert m.index[0, 0, 15, 15].item() == 20 * 30 + 22
+        assert m.dist[0, 0, 15, 15].item() < 1e-6
+        assert m.index[0, 0, 20, 22].item() == 15 * 30 + 15
+        assert m.dist[0, 1, 15, 15].item() > 0.1  # the others are real, different blocks
+
+    def test_temperature_tensor_gets_gradient(self):
+        x, c, t = _inputs()
+        temp = torch.tensor(0.7, requires_grad=True)
+        m = block_match(x, c, t, block_size=3, search_window=7, k=5, temperature=temp)
+        (m.weight[:, 0].sum()).backward()
+        assert temp.grad is not None and torch.isfinite(temp.grad)
+
+    def test_input_not_modified_and_noncontiguous(self):
+        x, c, t = _inputs(b=1, h=14, w=11)
+        x0, c0, t0 = x.clone(), c.clone(), t.clone()
+        a = block_match(x.transpose(-1, -2), c.transpose(-1, -2), t.transpose(-1, -2), block_size=3,
+                        search_window=7, k=4)
+        b = block_match(x.transpose(-1, -2).contiguous(), c.transpose(-1, -2).contiguous(),
+                        t.transpose(-1, -2).contiguous(), block_size=3, search_window=7, k=4)
+        assert torch.equal(a.index, b.index)
+        assert torch.equal(x, x0) and torch.equal(c, c0) and torch.equal(t, t0)
+
+    def test_depth_only_identical_blocks_tie_to_smaller_offset(self):
+        x = torch.zeros(1, 1, 9, 9)  # every block identical: ties everywhere
+        ref = block_match_reference(x, None, None, block_size=3, search_window=5, k=4)
+        for backend in BACKENDS:
+            fast = block_match(x, None, None, block_size=3, search_window=5, k=4, backend=backend)
+            assert torch.equal(fast.index, ref.index), backend
+        assert (ref.weight == 0.25).all()
+
+    @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+    def test_cuda_matches_cpu(self):
+        x, c, t = _inputs()
+        a = block_match(x, c, t, block_size=3, search_window=7, k=5)
+        b = block_match(x.cuda(), c.cuda(), t.cuda(), block_size=3, search_window=7, k=5)
+        assert b.index.is_cuda
+        assert_same_matches(BlockMatches(*(v.cpu() for v in b)), a, 1e-5)
+
+
+class TestBlockMatchErrors:
+    def test_wrong_ndim(self):
+        with pytest.raises(ShapeError, match=r"depth must have shape \(B,C,H,W\); got \(8, 8\)"):
+            block_match(torch.rand(8, 8))
+
+    def test_depth_channels(self):
+        with pytest.raises(ShapeError, match="depth must have 1 channel"):
+            block_match(torch.rand(1, 2, 8, 8))
+
+    def test_mismatched_rgb(self):
+        with pytest.raises(ShapeError, match=r"depth and rgb must share.*\(1, 3, 9, 8\)"):
+            block_match(torch.rand(1, 1, 8, 8), torch.rand(1, 3, 9, 8), search_window=5, k=3)
+
+    def test_mismatched_trust(self):
+        with pytest.raises(ShapeError, match="depth and trust"):
+            block_match(torch.rand(2, 1, 8, 8), None, torch.ones(1, 1, 8, 8), search_window=5, k=3)
+
+    def test_even_block_size(self):
+        with pytest.raises(DepthSRError, match="block_size must be a positive odd int.*got 4"):
+            block_match(torch.rand(1, 1, 8, 8), block_size=4)
+
+    def test_even_window(self):
+        with pytest.raises(DepthSRError, match="search_window must be a positive odd int.*got 20"):
+            block_match(torch.rand(1, 1, 30, 30), search_window=20)
+
+    def test_image_smaller_than_block(self):
+        with pytest.raises(ShapeError, match="depth is 4x9, smaller than one 5x5 block"):
+            block_match(torch.rand(1, 1, 4, 9), search_window=3, k=1)
+
+    def test_k_too_large(self):
+        with pytest.raises(DepthSRError, match=r"k=9 is larger than the number of candidate blocks.*\(8 at"):
+            block_match(torch.rand(1, 1, 12, 12), block_size=3, search_window=5, k=9)
+        block_match(torch.rand(1, 1, 12, 12), block_size=3, search_window=5, k=9, include_self=True)
+
+    def test_bad_scalars(self):
+        with pytest.raises(DepthSRError, match="temperature must be finite and > 0"):
+            block_match(torch.rand(1, 1, 12, 12), search_window=5, k=3, temperature=0.0)
+        with pytest.raises(DepthSRError, match="color_weight must be finite and >= 0"):
+            block_match(torch.rand(1, 1, 12, 12), search_window=5, k=3, color_weight=-1.0)
+        with pytest.raises(DepthSRError, match="backend must be"):
+            block_match(torch.rand(1, 1, 12, 12), search_window=5, k=3, backend="cuda")
+
+    def test_integer_depth_rejected(self):
+        with pytest.raises(DepthSRError, match="floating"):
+            block_match(torch.ones(1, 1, 12, 12, dtype=torch.int32), search_window=5, k=3)
+
+
+class TestGatherNeighbors:
+    def test_matches_loop_and_grad(self):
+        g = torch.Generator().manual_seed(0)
+        v = torch.rand(2, 3, 5, 6, generator=g, dtype=torch.float64, requires_grad=True)
+        idx = torch.randint(0, 30, (2, 4, 5, 6), generator=g)
+        out = gather_neighbors(v, idx)
+        assert out.shape == (2, 3, 4, 5, 6)
+        for b, ch, m, i, j in itertools.product(range(2), range(3), range(4), range(5), range(6)):
+            p = idx[b, m, i, j].item()
+            assert out[b, ch, m, i, j] == v[b, ch, p // 6, p % 6]
+        assert torch.autograd.gradcheck(lambda t: gather_neighbors(t, idx), (v,))
+
+    def test_errors(self):
+        with pytest.raises(DepthSRError, match="int64"):
+            gather_neighbors(torch.rand(1, 1, 4, 4), torch.zeros(1, 2, 4, 4, dtype=torch.int32))
+        with pytest.raises(ShapeError, match="must share"):
+            gather_neighbors(torch.rand(1, 1, 4, 4), torch.zeros(1, 2, 5, 4, dtype=torch.int64))
+
+
+def test_numpy_and_c_fallback_env(monkeypatch):
+    """The auto backend works whatever the C kernel's availability."""
+    import torch_depth_sr.block_matching as bm
+
+    monkeypatch.setattr(bm, "_CLIB", None)
+    monkeypatch.setattr(bm, "_CLIB_TRIED", True)
+    x, c, t = _inputs(b=1)
+    a = block_match(x, c, t, block_size=3, search_window=7, k=5)
+    r = block_match_reference(x, c, t, block_size=3, search_window=7, k=5)
+    assert_same_matches(a, r, 1e-5)
+    assert np.isfinite(a.dist.numpy()).all()

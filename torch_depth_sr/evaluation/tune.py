@@ -1,0 +1,90 @@
+"""Documented parameter search on the fitting split only (Middlebury 2006 + synthetic scenes).
+
+``python -m torch_depth_sr.evaluation.tune [--rounds 2] [--crop 160]`` runs a coordinate search:
+each parameter in turn is multiplied by a few factors, the best mean RMSE over tracks ``paper``
+and ``sensor`` on centre crops of the 2006 scenes (plus synthetic scenes) is kept, and the
+rounds repeat with finer factors. It prints every trial and the final config as JSON. The
+2005, 2003 and 2001 scenes are never used here.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import torch
+
+from ..config import RestorerConfig
+from ..model import DepthRestorer
+
+SEARCH = ("mu1", "mu2", "lam", "eta", "gamma", "color_weight", "temperature", "singular_sigma_floor")
+
+
+def fitting_samples(crop: int, n_synthetic: int = 4):
+    from .._data_root import data_root
+    from ..datasets.discover import find_scenes
+    from ..datasets.synthetic import make_scene
+    from .protocols import make_degradation
+
+    out = []
+    scenes = [r for r in find_scenes(data_root(), "paper") if r.year == 2006]
+    loaded = [r.load() for r in scenes]
+    for i in range(n_synthetic):
+        s = make_scene(crop, crop, seed=1000 + i)
+        loaded.append({**s, "name": f"synthetic{i}"})
+    for track in ("paper", "sensor"):
+        deg = make_degradation(track)
+        for s in loaded:
+            d = deg(s)
+            h, w = d["gt"].shape[-2:]
+            t, l = max(0, (h - crop) // 2), max(0, (w - crop) // 2)
+            sl = (Ellipsis, slice(t, t + crop), slice(l, l + crop))
+            out.append({"track": track, "name": s["name"], "depth": d["depth"][sl][None], "rgb": d["rgb"][sl][None],
+                        "gt": d["gt"][sl][None], "mask": d["mask"][sl][None]})
+    return out
+
+
+def score(config: RestorerConfig, samples) -> float:
+    model = DepthRestorer(config)
+    errs = []
+    with torch.no_grad():
+        for s in samples:
+            p = model(s["depth"], s["rgb"])
+            m = s["mask"]
+            errs.append(float(((p - s["gt"]) ** 2 * m).sum() / m.sum()) ** 0.5)
+    return sum(errs) / len(errs)
+
+
+def coordinate_search(config: RestorerConfig, samples, rounds: int = 2, names=SEARCH, log=print):
+    best = score(config, samples)
+    log(f"start {best:.4f}")
+    for rnd in range(rounds):
+        factors = (0.25, 0.5, 2.0, 4.0) if rnd == 0 else (0.7, 1.4)
+        for name in names:
+            for f in factors:
+                trial = config.replace(**{name: getattr(config, name) * f})
+                t0 = time.perf_counter()
+                s = score(trial, samples)
+                log(f"round {rnd} {name}={getattr(trial, name):.4g}: {s:.4f} ({time.perf_counter() - t0:.1f}s)")
+                if s < best:
+                    best, config = s, trial
+            log(f"  keep {name}={getattr(config, name):.4g} -> {best:.4f}")
+    return config, best
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--crop", type=int, default=160)
+    p.add_argument("--names", nargs="*", default=list(SEARCH))
+    p.add_argument("--start", default=None, help="JSON of config overrides to start from")
+    args = p.parse_args(argv)
+    torch.set_num_threads(max(1, torch.get_num_threads()))
+    samples = fitting_samples(args.crop)
+    cfg = RestorerConfig().replace(**(json.loads(args.start) if args.start else {}))
+    cfg, best = coordinate_search(cfg, samples, args.rounds, args.names)
+    print(json.dumps({n: getattr(cfg, n) for n in SEARCH}, indent=1), f"score {best:.4f}")
+
+
+if __name__ == "__main__":
+    main()
