@@ -160,13 +160,16 @@ def _finish(dist, index, temp):
 
 
 def _index_from_offsets(oid: torch.Tensor, search_window: int, h: int, w: int) -> torch.Tensor:
-    """Offset ids ``(dy+R)·S + (dx+R)`` at pixel (i, j) → flat index ``(i+dy)·W + (j+dx)``."""
+    """Offset ids ``(dy+R)·S + (dx+R)`` at pixel (i, j) → flat index ``(i+dy)·W + (j+dx)`` (int64).
+
+    Uses a lookup table ``dy·W + dx`` and one in-place add, so the only large allocation is the result.
+    """
     r = search_window // 2
-    dy = torch.div(oid, search_window, rounding_mode="floor") - r
-    dx = oid % search_window - r
-    ii = torch.arange(h, device=oid.device).view(1, 1, h, 1)
-    jj = torch.arange(w, device=oid.device).view(1, 1, 1, w)
-    return (ii + dy) * w + (jj + dx)
+    offs = torch.arange(-r, r + 1, device=oid.device)
+    lut = (offs.view(-1, 1) * w + offs.view(1, -1)).reshape(-1)  # (S²,) int64
+    index = lut[oid.long()]  # (B, k, H, W)
+    index += torch.arange(h * w, device=oid.device).view(1, 1, h, w)
+    return index
 
 
 # ----------------------------------------------------------------------------------------------
@@ -581,7 +584,7 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
     npdt = np.float64 if f64 else np.float32
     fn = lib.bm_rows_f64 if f64 else lib.bm_rows_f32
     if chunk_rows is None:
-        chunk_rows = max(8, -(-h // (2 * max(1, torch.get_num_threads()))))
+        chunk_rows = 8  # the chunk's running top-k (8·W·k values) stays in the L2 cache
     samples, jobs = [], []
     for b in range(bsz):
         xp = np.ascontiguousarray(_pad_plane(depth[b, 0].cpu().numpy().astype(npdt, copy=False), r, big_r))
@@ -613,9 +616,10 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
     else:
         for j in jobs:
             run(j)
-    dist = torch.from_numpy(topd).permute(0, 2, 1).reshape(bsz, k, h, w).to(depth.dtype)
-    oid = torch.from_numpy(topi.astype(np.int64)).permute(0, 2, 1).reshape(bsz, k, h, w)
-    return dist.contiguous(), _index_from_offsets(oid, search_window, h, w)
+    dist = torch.from_numpy(topd).permute(0, 2, 1).reshape(bsz, k, h, w).to(depth.dtype)  # (B, k, H, W)
+    del topd
+    index = _index_from_offsets(torch.from_numpy(topi).view(bsz, h, w, k).permute(0, 3, 1, 2), search_window, h, w)
+    return dist.contiguous(), index
 
 
 # ----------------------------------------------------------------------------------------------

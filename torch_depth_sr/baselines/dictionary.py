@@ -112,51 +112,60 @@ def batched_omp(
     inv_norm = torch.where(norms2 > 1e3 * eps * norms2.amax(1, keepdim=True).clamp_min(tiny),
                            norms2.clamp_min(tiny).rsqrt(), torch.zeros_like(norms2))  # (N, K)
 
-    r = Xm
     res2 = Xm.square().sum(1)  # (N,)
     # An atom whose correlation is at rounding level of the signal norm cannot reduce the residual.
     min_corr = 1e2 * eps * res2.sqrt()  # (N,)
     if tol is None:
         tol_t = None
-        active = torch.ones(n, dtype=torch.bool, device=X.device)
+        act = torch.arange(n, device=X.device)
     else:
         tol_t = torch.as_tensor(tol, dtype=X.dtype, device=X.device).expand(n)
-        active = res2 > tol_t
-    support = torch.zeros(n, n_nonzero, dtype=torch.long, device=X.device)  # (N, S)
-    valid = torch.zeros(n, n_nonzero, dtype=torch.bool, device=X.device)  # (N, S)
-    selected = torch.zeros(n, k_atoms, dtype=torch.bool, device=X.device)  # (N, K)
-    a = X.new_zeros(n, 0)
-    steps = 0
+        act = (res2 > tol_t).nonzero()[:, 0]
+    # Only the signals still active are touched; a signal that stops keeps its buffers. All the
+    # support slots of an active signal are in use, so no per-slot validity is needed.
+    s_max = n_nonzero
+    r = Xm.clone()  # (N, F)
+    Ds = X.new_zeros(n, s_max, f)  # (N, S, F) selected atoms restricted to the observed entries
+    G = X.new_zeros(n, s_max, s_max)  # (N, S, S) their Gram matrix, grown one row/column a step
+    rhs = X.new_zeros(n, s_max)  # (N, S) their correlations with the signal
+    acoef = X.new_zeros(n, s_max)  # (N, S) least-squares coefficients on the support
+    support = torch.zeros(n, s_max, dtype=torch.long, device=X.device)  # (N, S)
+    n_active = torch.zeros(n, dtype=torch.long, device=X.device)  # (N,)
     Dt = D.t()  # (K, F)
-    for step in range(n_nonzero):
-        corr = ((r @ D) * inv_norm).abs().masked_fill(selected, 0.0)  # (N, K)
-        best, idx = corr.max(1)  # (N,)
-        active = active & (best > min_corr) & (best > 0)
-        if not bool(active.any()):
+    for step in range(s_max):
+        if act.numel() == 0:
             break
-        steps = step + 1
-        support[:, step] = torch.where(active, idx, torch.zeros_like(idx))
-        valid[:, step] = active
-        selected[active, idx[active]] = True
-        S = support[:, :steps]  # (N, s)
-        V = valid[:, :steps].to(X.dtype)  # (N, s)
-        Ds = Dt[S] * V[..., None]  # (N, s, F)
+        corr = (r[act] @ D).mul_(inv_norm[act]).abs_()  # (n_a, K)
+        if step > 0:
+            corr.scatter_(1, support[act, :step], 0.0)  # never reselect an atom
+        best, idx = corr.max(1)  # (n_a,)
+        keep = (best > min_corr[act]) & (best > 0)
+        act, idx = act[keep], idx[keep]
+        if act.numel() == 0:
+            break
+        v = Dt[idx]  # (n_a, F)
         if mask is not None:
-            Ds = Ds * mask[:, None, :]
-        G = Ds @ Ds.transpose(1, 2)  # (N, s, s)
-        diag = torch.diagonal(G, dim1=1, dim2=2)  # (N, s)
-        ridge = 1e2 * eps * diag.amax(1, keepdim=True).clamp_min(tiny) + (1.0 - V)  # (N, s)
-        G = G + torch.diag_embed(ridge)
-        rhs = Ds @ Xm[..., None]  # (N, s, 1)
-        a = torch.linalg.solve(G, rhs)[..., 0] * V  # (N, s)
-        r = Xm - (a[:, None, :] @ Ds)[:, 0]  # (N, F)
-        res2 = r.square().sum(1)
+            v = v * mask[act]
+        xa = Xm[act]  # (n_a, F)
+        Ds[act, step] = v
+        Dprev = Ds[act, : step + 1]  # (n_a, s, F)
+        g = (Dprev @ v[..., None])[..., 0]  # (n_a, s) new Gram row
+        G[act, step, : step + 1] = g
+        G[act, : step + 1, step] = g
+        rhs[act, step] = (v * xa).sum(1)
+        Ga = G[act, : step + 1, : step + 1]  # (n_a, s, s)
+        ridge = 1e2 * eps * torch.diagonal(Ga, dim1=1, dim2=2).amax(1).clamp_min(tiny)  # (n_a,)
+        Ga = Ga + ridge[:, None, None] * torch.eye(step + 1, dtype=X.dtype, device=X.device)
+        sol = torch.linalg.solve(Ga, rhs[act, : step + 1, None])[..., 0]  # (n_a, s)
+        acoef[act, : step + 1] = sol
+        support[act, step] = idx
+        n_active[act] = step + 1
+        ra = xa - (sol[:, None, :] @ Dprev)[:, 0]  # (n_a, F)
+        r[act] = ra
+        res2[act] = ra.square().sum(1)
         if tol_t is not None:
-            active = active & (res2 > tol_t)
-    coef = X.new_zeros(n, k_atoms)
-    if steps > 0:
-        coef = coef.scatter_add(1, support[:, :steps], a * valid[:, :steps].to(X.dtype))
-    n_active = valid.sum(1)
+            act = act[res2[act] > tol_t[act]]
+    coef = X.new_zeros(n, k_atoms).scatter_add(1, support, acoef)  # unused slots add 0 to atom 0
     return OMPResult(coef, n_active, res2)
 
 
