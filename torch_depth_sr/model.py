@@ -123,7 +123,7 @@ class DepthRestorer(nn.Module):
         c = self.config
         ctx = RestorationContext(y=yn, observed=observed, rgb=guide, factor=factor, config=c,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp())
-        x0 = fill_holes(yn, observed)
+        x0 = initial_estimate(yn, observed, guide, factor, c)
         if factor > 1:
             x0 = F.interpolate(x0, scale_factor=factor, mode="bicubic", align_corners=False)
         b, _, hh, ww = x0.shape
@@ -161,6 +161,38 @@ class DepthRestorer(nn.Module):
         state = torch.load(d / "state_dict.pt", map_location=map_location, weights_only=True)
         model.load_state_dict(state)
         return model
+
+    @classmethod
+    def from_pretrained(cls, name: str, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
+        """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README).
+
+        Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'upsample-x4'``
+        where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
+
+        Examples:
+            >>> DepthRestorer.from_pretrained("denoise").config.num_layers  # doctest: +SKIP
+            8
+        """
+        root = Path(__file__).resolve().parent / "pretrained"
+        available = sorted(p.name for p in root.iterdir() if (p / "state_dict.pt").is_file()) if root.is_dir() else []
+        if name not in available:
+            raise ValueError(f"no pretrained parameters named {name!r}; available are {available} "
+                             f"(folders of {root} holding config.json and state_dict.pt).")
+        return cls.load(root / name, trainable=trainable, map_location=map_location)
+
+
+def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:
+    """x⁰ on the observation grid: push-pull fill, or a colour-guided normalised convolution (masked JBF)."""
+    if c.init_fill == "pushpull" or guide is None:
+        return fill_holes(yn, observed)
+    if c.init_fill != "jbf":
+        raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'jbf' and 'pushpull'.")
+    from .baselines.jbf import joint_bilateral_filter
+
+    g = guide if factor == 1 else F.avg_pool2d(guide, factor)
+    x0 = joint_bilateral_filter(yn, g, observed, kernel_size=c.init_kernel_size, sigma_space=c.init_sigma_space,
+                                sigma_color=c.init_sigma_color)
+    return torch.where(observed > 0, yn, x0) if c.init_keep_observed else x0
 
 
 def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:

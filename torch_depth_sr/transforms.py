@@ -356,7 +356,8 @@ class AddFlyingPixels(_DepthTransform):
         nmax = F.max_pool2d(torch.where(m, x, torch.full_like(x, -big)), 5, stride=1, padding=2).reshape(shape)
         nmin = -F.max_pool2d(torch.where(m, -x, torch.full_like(x, -big)), 5, stride=1, padding=2).reshape(shape)
         t = p["t"].to(f.device, f.dtype)
-        return torch.where(p["flying"].to(f.device), t * nmin + (1 - t) * nmax, f)
+        flying = torch.minimum(torch.maximum(t * nmin + (1 - t) * nmax, nmin), nmax)  # rounding-safe
+        return torch.where(p["flying"].to(f.device), flying, f)
 
 
 class AddImpulses(_DepthTransform):

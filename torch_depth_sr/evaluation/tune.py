@@ -17,7 +17,7 @@ import torch
 from ..config import RestorerConfig
 from ..model import DepthRestorer
 
-SEARCH = ("mu1", "mu2", "lam", "eta", "gamma", "color_weight", "temperature", "singular_sigma_floor")
+SEARCH = ("gamma", "singular_sigma_floor", "lam", "eta", "mu1", "mu2", "color_weight", "temperature", "init_sigma_color")
 
 
 def fitting_samples(crop: int, n_synthetic: int = 4):
@@ -61,8 +61,9 @@ def coordinate_search(config: RestorerConfig, samples, rounds: int = 2, names=SE
     for rnd in range(rounds):
         factors = (0.25, 0.5, 2.0, 4.0) if rnd == 0 else (0.7, 1.4)
         for name in names:
+            base = getattr(config, name)
             for f in factors:
-                trial = config.replace(**{name: getattr(config, name) * f})
+                trial = config.replace(**{name: base * f})
                 t0 = time.perf_counter()
                 s = score(trial, samples)
                 log(f"round {rnd} {name}={getattr(trial, name):.4g}: {s:.4f} ({time.perf_counter() - t0:.1f}s)")

@@ -13,9 +13,14 @@ so the 2-D Neumann Laplacian has eigenvalues
 
 .. math:: (a I + c\,D^\top D)^{-1} b = \operatorname{idct2}\big(\operatorname{dct2}(b) / (a + c\,λ)\big).
 
-The transforms are dense matrix products (``C_H X C_Wᵀ``), fast with BLAS for the image sizes of
-this library and exact in float64; the matrices and eigenvalue grids are cached per
-``(size, dtype, device)``.
+Small sizes use dense matrix products (``C_H X C_Wᵀ``, exact and fast with BLAS); from
+``_FFT_MIN`` samples along a dimension the transform is computed with one complex FFT of the
+same length (Makhoul 1980: even samples, then odd samples reversed, FFT, twiddle by
+``exp(−iπk/2n)``), ``O(n log n)`` instead of ``O(n²)`` per line — at 640×480 the matrix form costs
+0.7 GFLOP per 2-D transform, the FFT form about 1/50 of that. Both agree to float round-off.
+Matrices, twiddles and eigenvalue grids are cached per ``(size, dtype, device)``.
+
+Reference: J. Makhoul, "A fast cosine transform in one and two dimensions", IEEE TASSP 28(1), 1980.
 """
 from __future__ import annotations
 
@@ -76,6 +81,47 @@ def neumann_eigenvalues(
     return _eigenvalues_cached(int(h), int(w), dtype, dev)
 
 
+_FFT_MIN = 64  # from this length on, a DCT along one dimension uses the FFT (measured crossover ~48-96)
+
+
+@lru_cache(maxsize=64)
+def _fft_tables(n: int, dtype: torch.dtype, device: torch.device):
+    """Twiddles and orthonormal scales of the FFT-based DCT-II / DCT-III of length ``n``."""
+    k = torch.arange(n, dtype=torch.float64)
+    fwd = torch.polar(torch.ones(n, dtype=torch.float64), -math.pi * k / (2 * n))  # (n,) complex128
+    scale = torch.full((n,), math.sqrt(2.0 / n), dtype=torch.float64)
+    scale[0] = math.sqrt(1.0 / n)
+    inv_scale = scale.clone()
+    inv_scale[1:] *= 0.5  # the real part of the folded spectrum counts every k > 0 twice
+    cdt = torch.complex128 if dtype == torch.float64 else torch.complex64
+    return (fwd.to(device=device, dtype=cdt), scale.to(device=device, dtype=dtype),
+            fwd.conj().to(device=device, dtype=cdt), inv_scale.to(device=device, dtype=dtype))
+
+
+def _dct_last(x: torch.Tensor) -> torch.Tensor:
+    """Orthonormal DCT-II along the last dim (matrix for short lines, FFT otherwise)."""
+    n = x.shape[-1]
+    if n < _FFT_MIN:
+        return x @ dct_matrix(n, x.dtype, x.device).T
+    fwd, scale, _, _ = _fft_tables(n, x.dtype, x.device)
+    v = torch.cat([x[..., ::2], x[..., 1::2].flip(-1)], dim=-1)  # (..., n)
+    return (torch.fft.fft(v, dim=-1) * fwd).real * scale
+
+
+def _idct_last(c: torch.Tensor) -> torch.Tensor:
+    """Orthonormal DCT-III (inverse of :func:`_dct_last`) along the last dim."""
+    n = c.shape[-1]
+    if n < _FFT_MIN:
+        return c @ dct_matrix(n, c.dtype, c.device)
+    _, _, inv, inv_scale = _fft_tables(n, c.dtype, c.device)
+    cs = c * inv_scale
+    rev = torch.cat([torch.zeros_like(cs[..., :1]), cs[..., 1:].flip(-1)], dim=-1)  # c_{n-k}, c_n = 0
+    v = torch.fft.ifft(torch.complex(cs, -rev) * inv, dim=-1).real * n  # (..., n)
+    half = (n + 1) // 2
+    return torch.cat([v[..., :half, None], torch.cat([v[..., half:].flip(-1), v.new_zeros(v.shape[:-1] + (half * 2 - n,))],
+                                                     dim=-1)[..., None]], dim=-1).flatten(-2)[..., :n]
+
+
 def _check_image(x: torch.Tensor, name: str) -> None:
     if not isinstance(x, torch.Tensor):
         raise DepthSRError(f"{name} must be a torch.Tensor; got {type(x).__name__}.")
@@ -101,9 +147,7 @@ def dct2(x: torch.Tensor) -> torch.Tensor:
         [[[[2.0, 0.0], [0.0, 0.0]]]]
     """
     _check_image(x, "x")
-    ch = dct_matrix(x.shape[-2], x.dtype, x.device)  # (H, H)
-    cw = dct_matrix(x.shape[-1], x.dtype, x.device)  # (W, W)
-    return ch @ x @ cw.T  # (..., H, W)
+    return _dct_last(_dct_last(x).transpose(-1, -2)).transpose(-1, -2)  # (..., H, W)
 
 
 def idct2(x: torch.Tensor) -> torch.Tensor:
@@ -120,9 +164,7 @@ def idct2(x: torch.Tensor) -> torch.Tensor:
         [[1.0, 1.0], [1.0, 1.0]]
     """
     _check_image(x, "x")
-    ch = dct_matrix(x.shape[-2], x.dtype, x.device)
-    cw = dct_matrix(x.shape[-1], x.dtype, x.device)
-    return ch.T @ x @ cw  # (..., H, W)
+    return _idct_last(_idct_last(x).transpose(-1, -2)).transpose(-1, -2)  # (..., H, W)
 
 
 def _as_coefficient(v: float | torch.Tensor, b: torch.Tensor, name: str, positive: bool) -> float | torch.Tensor:

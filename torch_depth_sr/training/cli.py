@@ -1,0 +1,93 @@
+"""``torch-depth-sr train``: argument parser and command (wired into :mod:`torch_depth_sr.cli`).
+
+Single process::
+
+    torch-depth-sr train --out runs/denoise --steps 300
+
+Many processes / machines (DistributedDataParallel, gloo on CPU, nccl on GPU)::
+
+    torchrun --nproc_per_node 4 -m torch_depth_sr.training.cli --out runs/denoise --steps 300
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from .train import TrainConfig
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    d = TrainConfig()
+    p.add_argument("--out", default=d.out, help="run folder (checkpoint/, best/, last/, history.json)")
+    p.add_argument("--data", default=None, help="data root holding middlebury2006 (default: $TORCH_DEPTH_SR_DATA)")
+    p.add_argument("--steps", type=int, default=d.steps)
+    p.add_argument("--batch-size", type=int, default=d.batch_size, help="per process")
+    p.add_argument("--crop", type=int, default=d.crop)
+    p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--weight-decay", type=float, default=d.weight_decay)
+    p.add_argument("--loss", choices=["l2", "l1"], default=d.loss)
+    p.add_argument("--degradation", choices=["paper", "sensor", "mixed"], default=d.degradation)
+    p.add_argument("--sigma", type=float, nargs=2, default=list(d.sigma), metavar=("MIN", "MAX"),
+                   help="training noise std range (grey levels)")
+    p.add_argument("--val-sigma", type=float, default=d.val_sigma)
+    p.add_argument("--scale-factor", type=int, default=d.scale_factor, help=">1: train guided upsampling")
+    p.add_argument("--synthetic", type=int, default=d.synthetic, help="number of synthetic training scenes")
+    p.add_argument("--synthetic-only", action="store_true", help="no Middlebury data (e.g. CI)")
+    p.add_argument("--val-scenes", nargs="*", default=list(d.val_scenes), help="2006 scenes held out for validation")
+    p.add_argument("--val-size", type=int, default=d.val_size, help="validation crops per track")
+    p.add_argument("--val-every", type=int, default=d.val_every)
+    p.add_argument("--save-every", type=int, default=d.save_every)
+    p.add_argument("--workers", type=int, default=d.num_workers)
+    p.add_argument("--threads", type=int, default=d.threads, help="torch threads per process")
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--device", default=d.device)
+    p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint if present")
+    p.add_argument("--stop-at", type=int, default=None, help="end this run after this step (resume later)")
+    p.add_argument("--init", default=None, help="start from a pretrained name or saved folder (default: defaults)")
+    p.add_argument("--model", default="{}", help='RestorerConfig overrides as JSON, e.g. \'{"num_layers": 4}\'')
+    p.add_argument("--no-progress", action="store_true")
+
+
+def config_from_args(args) -> TrainConfig:
+    return TrainConfig(out=args.out, data=args.data, steps=args.steps, batch_size=args.batch_size, crop=args.crop,
+                       lr=args.lr, weight_decay=args.weight_decay, loss=args.loss, degradation=args.degradation,
+                       sigma=tuple(args.sigma), val_sigma=args.val_sigma, scale_factor=args.scale_factor,
+                       synthetic=args.synthetic, use_middlebury=not args.synthetic_only,
+                       val_scenes=tuple(args.val_scenes), val_size=args.val_size, val_every=args.val_every,
+                       save_every=args.save_every, num_workers=args.workers, threads=args.threads, seed=args.seed,
+                       device=args.device, resume=args.resume, stop_at=args.stop_at, init=args.init, model=json.loads(args.model),
+                       progress=not args.no_progress)
+
+
+def cmd_train(args) -> int:
+    """Run training from parsed arguments; prints where the results are."""
+    from .train import train
+
+    cfg = config_from_args(args)
+    train(cfg)
+    import torch.distributed as dist
+
+    if not dist.is_initialized() or dist.get_rank() == 0:
+        print(f"best parameters: {cfg.out}/best  (DepthRestorer.load('{cfg.out}/best'))")
+    if dist.is_initialized():
+        dist.destroy_process_group()
+    return 0
+
+
+def add_train_parser(subparsers) -> argparse.ArgumentParser:
+    """Add the ``train`` sub-command to an ``argparse`` sub-parser set."""
+    p = subparsers.add_parser("train", help="learn the per-layer parameters end to end (torchrun for DDP)")
+    _add_arguments(p)
+    p.set_defaults(func=cmd_train)
+    return p
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="torch-depth-sr train", description="Train the unrolled restorer.")
+    _add_arguments(p)
+    return cmd_train(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
