@@ -30,6 +30,11 @@ class RestorerConfig:
     init_kernel_size: int = 7
     init_sigma_space: float = 3.0
     init_sigma_color: float = 0.05
+    # guided upsampling: x⁰ by joint bilateral upsampling ("jbu") or "bicubic"; the TV weight λ is divided by
+    # the factor s (TV of an s-times finer grid grows like s for the same surface; the quadratic terms do not)
+    upsample_init: str = "jbu"
+    upsample_jbu: dict = field(default_factory=lambda: {"radius": 2, "sigma_space": 1.0, "sigma_color": 0.1})
+    upsample_tv_per_factor: bool = True
     # terms (ablations: tv = all False; tv+nl = use_nonlocal only)
     use_nonlocal: bool = True
     use_outliers: bool = True

@@ -127,6 +127,8 @@ class UnrolledLayer(nn.Module):
         c = ctx.config
         dt = s.x.dtype
         lam, eta, gamma, mu1, mu2 = (self.value(n).to(dt) for n in self.names)
+        if ctx.factor > 1 and c.upsample_tv_per_factor:
+            lam = lam / ctx.factor
         shrink = group_soft_threshold if c.isotropic else soft_threshold
         dx = grad(s.x)  # (B,2,H,W)
         z = shrink(dx, lam / mu1)

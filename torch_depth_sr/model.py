@@ -125,7 +125,7 @@ class DepthRestorer(nn.Module):
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp())
         x0 = initial_estimate(yn, observed, guide, factor, c)
         if factor > 1:
-            x0 = F.interpolate(x0, scale_factor=factor, mode="bicubic", align_corners=False)
+            x0 = upsample_initial(x0, observed, guide, factor, c)
         b, _, hh, ww = x0.shape
         zeros2 = x0.new_zeros(b, 2, hh, ww)
         matches = None
@@ -193,6 +193,15 @@ def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig) -> tor
     x0 = joint_bilateral_filter(yn, g, observed, kernel_size=c.init_kernel_size, sigma_space=c.init_sigma_space,
                                 sigma_color=c.init_sigma_color)
     return torch.where(observed > 0, yn, x0) if c.init_keep_observed else x0
+
+
+def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:
+    """x⁰ on the high-resolution grid: joint bilateral upsampling (Kopf et al. 2007) or bicubic."""
+    if c.upsample_init == "bicubic" or guide is None:
+        return F.interpolate(x0_lr, scale_factor=factor, mode="bicubic", align_corners=False)
+    from .baselines.jbf import joint_bilateral_upsample
+
+    return joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), **c.upsample_jbu)
 
 
 def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:

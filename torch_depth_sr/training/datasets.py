@@ -153,6 +153,10 @@ class CropDataset(Dataset):
             from ..evaluation.protocols import make_degradation
 
             crop = make_degradation(track, sigma=sigma, seed=dseed)(crop)
+        d = crop["depth"]
+        # Gaussian noise can push tiny disparities below 0; the restorer rejects negative depth, so such
+        # measurements are clamped to a small positive value (they stay measurements, holes stay 0)
+        crop["depth"] = torch.where(d < 0, torch.full_like(d, 1e-3), d)
         return {k: crop[k] for k in KEYS}
 
     def _downsample(self, crop: dict, sigma: float, dseed: int) -> dict:

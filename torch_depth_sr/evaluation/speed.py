@@ -1,0 +1,291 @@
+"""``torch-depth-sr bench --track speed``: time and peak memory of the model, its stages and the filters.
+
+Times, side by side in one run and on the same synthetic inputs
+(:func:`~torch_depth_sr.datasets.synthetic.make_scene` + Gaussian noise σ = 5 + holes):
+
+* ``full`` — :class:`~torch_depth_sr.DepthRestorer` with its default config, with the per-stage split
+  the model reports in ``info["seconds"]`` (block matching, singular detection, CG solves, the
+  rest = total − those) and the CG iterations of every layer;
+* ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
+* ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
+  reference every ratio is taken against (``ratio = method time / kornia-jbf9 time``, same size and
+  batch, same run).
+
+Each measurement is one warm-up call then the median of ``repeats`` timed calls. By default every
+(method, size, batch) runs in its own fresh Python subprocess, so that its peak memory is honest:
+the child builds its inputs, resets the kernel's peak-RSS counter (``/proc/self/clear_refs`` ← 5),
+runs, and reports ``VmHWM − VmRSS`` at the reset, i.e. the peak resident memory the method added on
+top of its inputs (all allocators: torch, numpy, OpenCV, the C kernel). Where the reset is not
+possible the absolute ``VmHWM`` is reported (``peak_kind = "process"``). On CUDA the figure is
+``torch.cuda.max_memory_allocated``.
+
+Options are read from ``args`` (the CLI namespace) with defaults when absent, or from environment
+variables: ``sizes`` / ``TORCH_DEPTH_SR_SPEED_SIZES`` ("HxW,HxW", e.g. "48x64"), ``batches`` /
+``..._BATCHES`` ("1,8"), ``repeats`` / ``..._REPEATS``, ``methods`` (list), ``isolate`` (subprocess per
+measurement, default True), ``threads`` / ``..._THREADS``, ``max_seconds`` (a method whose warm-up
+took longer than this is not repeated; its warm-up time is reported with ``repeats = 0``),
+``skip`` ("method@HxWxB" entries not to run; default skips batch 8 at 1088×1376 for ``full`` and
+``dictionary``, too slow on a 2-core CPU).
+"""
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import torch
+
+METHODS = ("full", "jbf", "dictionary", "kornia-jbf9")
+SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
+BATCHES = (1, 8)
+DEFAULT_SKIP = ("full@1088x1376x8", "dictionary@1088x1376x8")
+STAGES = ("block_matching", "singular", "cg")
+
+
+# ----------------------------------------------------------------------------------------------
+# inputs and methods
+# ----------------------------------------------------------------------------------------------
+
+
+def make_inputs(height: int, width: int, batch: int, seed: int = 0, sigma: float = 5.0, hole_fraction: float = 0.05):
+    """``(depth (B,1,H,W) with 0 = hole, rgb (B,3,H,W), gt (B,1,H,W))`` from synthetic scenes."""
+    from ..datasets.synthetic import make_scene
+
+    g = torch.Generator().manual_seed(seed)
+    ys, rgbs, gts = [], [], []
+    for i in range(batch):
+        s = make_scene(height, width, seed=seed + i)
+        gt = s["gt"]  # (1, H, W)
+        y = gt + sigma * torch.randn(gt.shape, generator=g)
+        holes = torch.rand(gt.shape, generator=g) < hole_fraction / 2  # scattered dropouts
+        hh, ww = max(2, height // 12), max(2, width // 12)  # plus a few rectangular holes
+        for _ in range(3):
+            r0 = int(torch.randint(0, height - hh, (1,), generator=g))
+            c0 = int(torch.randint(0, width - ww, (1,), generator=g))
+            holes[:, r0:r0 + hh // 2, c0:c0 + ww] = True
+        ys.append(torch.where(holes, torch.zeros_like(y), y.clamp_min(1.0)))
+        rgbs.append(s["rgb"])
+        gts.append(gt)
+    return torch.stack(ys), torch.stack(rgbs), torch.stack(gts)
+
+
+def _make_runner(method: str, device: str):
+    """A function ``(depth, rgb) -> (out, details or None)`` for ``method``."""
+    from .methods import DICTIONARY_PARAMS, JBF_PARAMS
+
+    if method == "full":
+        from ..model import DepthRestorer
+
+        model = DepthRestorer().to(device)
+
+        def run(y, rgb):
+            r = model(y, rgb, return_details=True)
+            return r.depth, r.info
+
+        return run
+    if method == "jbf":
+        from ..baselines import joint_bilateral_filter
+
+        return lambda y, rgb: (joint_bilateral_filter(y, rgb, (y > 0).to(y.dtype), **JBF_PARAMS), None)
+    if method == "dictionary":
+        from ..baselines import dictionary_denoise
+
+        return lambda y, rgb: (dictionary_denoise(y, rgb, (y > 0).to(y.dtype), **DICTIONARY_PARAMS), None)
+    if method == "kornia-jbf9":
+        import kornia
+
+        return lambda y, rgb: (kornia.filters.joint_bilateral_blur(y, rgb, (9, 9), 0.1, (3.0, 3.0)), None)
+    raise ValueError(f"unknown speed method {method!r}; allowed are {list(METHODS)}.")
+
+
+def _sync(device: str) -> None:
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
+
+
+def _proc_status(field: str) -> Optional[float]:
+    """A ``/proc/self/status`` field in MB (Linux), else None."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return None
+
+
+def _reset_peak() -> bool:
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def measure(method: str, height: int, width: int, batch: int, device: str = "cpu", repeats: int = 3,
+            max_seconds: float = 120.0, threads: Optional[int] = None) -> dict:
+    """One measurement in this process: warm-up, ``repeats`` timed calls, peak memory, stage split."""
+    if threads:
+        torch.set_num_threads(int(threads))
+    y, rgb, gt = make_inputs(height, width, batch)
+    y, rgb = y.to(device), rgb.to(device)
+    run = _make_runner(method, device)
+    cuda = device.startswith("cuda")
+    if cuda:
+        torch.cuda.reset_peak_memory_stats()
+        base = torch.cuda.memory_allocated()
+    else:
+        base = _proc_status("VmRSS")
+        reset = _reset_peak()
+    times, infos = [], []
+    with torch.no_grad():
+        t0 = time.perf_counter()
+        out, info = run(y, rgb)
+        _sync(device)
+        warm = time.perf_counter() - t0
+        n = repeats if warm <= max_seconds else 0
+        for _ in range(n):
+            t0 = time.perf_counter()
+            out, info = run(y, rgb)
+            _sync(device)
+            times.append(time.perf_counter() - t0)
+            infos.append(info)
+    row = {"method": method, "height": height, "width": width, "batch": batch, "repeats": len(times),
+           "seconds": statistics.median(times) if times else warm, "seconds_all": times, "warmup_seconds": warm}
+    if cuda:
+        row["peak_mb"] = (torch.cuda.max_memory_allocated() - base) / 2**20
+        row["peak_kind"] = "cuda_allocated_over_inputs"
+    else:
+        hwm = _proc_status("VmHWM")
+        if reset and hwm is not None and base is not None:
+            row["peak_mb"], row["peak_kind"] = max(0.0, hwm - base), "rss_over_inputs"
+        else:
+            row["peak_mb"], row["peak_kind"] = hwm, "process"
+    if info is not None:  # the model: stage split of the median run, CG iterations per layer
+        infos = infos or [info]
+        med = sorted(infos, key=lambda d: d["seconds"]["total"])[len(infos) // 2]
+        sec = dict(med["seconds"])
+        sec["rest"] = sec["total"] - sum(sec.get(k, 0.0) for k in STAGES)
+        row["stages"] = {k: sec.get(k, 0.0) for k in (*STAGES, "rest", "total")}
+        row["cg_iterations"] = list(med["cg_iterations"])
+        row["rmse"] = float((out.float().cpu() - gt).pow(2).mean().sqrt())
+    row["threads"] = torch.get_num_threads()
+    row["loadavg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    return row
+
+
+def _measure_isolated(method, h, w, b, device, repeats, max_seconds, threads) -> dict:
+    code = ("import json,sys; from torch_depth_sr.evaluation.speed import measure; "
+            "print('@@' + json.dumps(measure(*json.loads(sys.argv[1]))))")
+    arg = json.dumps([method, h, w, b, device, repeats, max_seconds, threads])
+    p = subprocess.run([sys.executable, "-c", code, arg], capture_output=True, text=True)
+    for line in p.stdout.splitlines():
+        if line.startswith("@@"):
+            return json.loads(line[2:])
+    return {"method": method, "height": h, "width": w, "batch": b, "error": (p.stderr or p.stdout)[-2000:]}
+
+
+# ----------------------------------------------------------------------------------------------
+# the benchmark
+# ----------------------------------------------------------------------------------------------
+
+
+def _option(args, name: str, env: str, default, parse):
+    v = getattr(args, name, None)
+    if v is None:
+        v = os.environ.get(env)
+    if v is None or v == "":
+        return default
+    return parse(v) if isinstance(v, str) else v
+
+
+def _parse_sizes(s: str):
+    return tuple(tuple(int(t) for t in part.lower().split("x")) for part in s.split(",") if part.strip())
+
+
+def _parse_ints(s: str):
+    return tuple(int(t) for t in s.split(",") if t.strip())
+
+
+def run_speed(args) -> int:
+    """Run the speed track; print a table; write ``{"metadata", "results"}`` JSON to ``args.json``."""
+    from ..cli import _metadata, _print_table
+
+    device = getattr(args, "device", None) or "cpu"
+    sizes = _option(args, "sizes", "TORCH_DEPTH_SR_SPEED_SIZES", SIZES, _parse_sizes)
+    batches = _option(args, "batches", "TORCH_DEPTH_SR_SPEED_BATCHES", BATCHES, _parse_ints)
+    repeats = int(_option(args, "repeats", "TORCH_DEPTH_SR_SPEED_REPEATS", 3, int))
+    threads = _option(args, "threads", "TORCH_DEPTH_SR_SPEED_THREADS", None, int)
+    max_seconds = float(_option(args, "max_seconds", "TORCH_DEPTH_SR_SPEED_MAX_SECONDS", 120.0, float))
+    skip = set(_option(args, "skip", "TORCH_DEPTH_SR_SPEED_SKIP", DEFAULT_SKIP, lambda s: s.split(",")))
+    isolate = bool(getattr(args, "isolate", True))
+    methods = [m for m in (getattr(args, "methods", None) or METHODS)]
+    if "kornia-jbf9" not in methods:
+        methods.append("kornia-jbf9")  # the reference of every ratio
+    for m in methods:
+        if m not in METHODS:
+            raise SystemExit(f"unknown speed method {m!r}; allowed are {list(METHODS)}.")
+    results, skipped = [], []
+    for h, w in sizes:
+        for b in batches:
+            for m in methods:
+                tag = f"{m}@{h}x{w}x{b}"
+                if tag in skip:
+                    skipped.append(tag)
+                    continue
+                if isolate:
+                    row = _measure_isolated(m, h, w, b, device, repeats, max_seconds, threads)
+                else:
+                    row = measure(m, h, w, b, device, repeats, max_seconds, threads)
+                results.append(row)
+                print(f"  {tag}: " + (f"{row['seconds']:.3f} s" if "seconds" in row else "ERROR " + row["error"]),
+                      flush=True)
+    ref = {(r["height"], r["width"], r["batch"]): r["seconds"] for r in results
+           if r["method"] == "kornia-jbf9" and "seconds" in r}
+    table = []
+    for r in results:
+        if "seconds" not in r:
+            continue
+        k = ref.get((r["height"], r["width"], r["batch"]))
+        r["ratio_to_kornia_jbf9"] = r["seconds"] / k if k else None
+        r["ms_per_frame"] = 1000.0 * r["seconds"] / r["batch"]
+        t = {"method": r["method"], "size": f"{r['width']}x{r['height']}", "batch": r["batch"],
+             "seconds": r["seconds"], "ms/frame": r["ms_per_frame"], "x kornia9": r["ratio_to_kornia_jbf9"],
+             "peak MB": r.get("peak_mb"), "load": r["loadavg"][0] if r.get("loadavg") else None}
+        st = r.get("stages")
+        if st:
+            t.update({"bm": st["block_matching"], "singular": st["singular"], "cg": st["cg"], "rest": st["rest"],
+                      "cg it/layer": "/".join(str(i) for i in r["cg_iterations"])})
+        table.append(t)
+    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "peak MB", "bm", "singular", "cg", "rest",
+            "cg it/layer", "load"]
+    meta = _metadata(device)
+    meta.update(track="speed", threads=threads or torch.get_num_threads(), cpu_count=os.cpu_count(),
+                sizes=[list(s) for s in sizes], batches=list(batches), repeats=repeats, isolated=isolate,
+                skipped=skipped, loadavg_end=list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
+                memory="peak RSS added over the inputs, fresh subprocess per row (VmHWM after clear_refs)"
+                if isolate else "peak RSS added over the inputs in this process (VmHWM after clear_refs)",
+                inputs="make_scene + Gaussian noise sigma=5 + ~5% holes (2.5% dropouts, 3 rectangles)")
+    try:
+        import cv2
+        import numpy
+
+        meta.update(opencv=cv2.__version__, numpy=numpy.__version__, torch_threads=torch.get_num_threads())
+    except ImportError:  # pragma: no cover - both are dependencies
+        pass
+    _print_table(table, cols, f"track speed on {device}, {meta['threads']} thread(s); median of {repeats} "
+                 f"after a warm-up; 'x kornia9' = time / kornia joint_bilateral_blur 9x9 (same size, batch, run)")
+    if skipped:
+        print("skipped (too slow here): " + ", ".join(skipped))
+    if getattr(args, "json", None):
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps({"metadata": meta, "results": results}, indent=1))
+        print(f"json: {args.json}")
+    return 0
