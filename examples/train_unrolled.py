@@ -24,7 +24,7 @@ def main() -> None:
     torch.set_num_threads(1)
     tiny = dict(num_layers=2, search_window=7, k=4) if a.tiny else {}
     cfg = TrainConfig(out=a.out, steps=a.steps, crop=a.crop, batch_size=a.batch_size, model=tiny,
-                      use_middlebury=not a.tiny, synthetic=3 if a.tiny else 32, val_size=2 if a.tiny else 16,
+                      use_middlebury=not a.tiny, synthetic=3 if a.tiny else 32, val_size=1 if a.tiny else 16,
                       val_every=max(1, a.steps // 4), num_workers=0 if a.tiny else 1)
     model = train(cfg)
     for i, values in enumerate(model.layer_parameters()):

@@ -117,7 +117,7 @@ def _ddp_worker(rank: int, world: int, port: int, out: str) -> None:
                       LOCAL_RANK=str(rank))
     import torch.distributed as dist
 
-    model = train(tiny_config(out, steps=3, val_every=0, save_every=3))
+    model = train(tiny_config(out, steps=2, val_every=0, save_every=2))
     torch.save(_params(model), Path(out) / f"params_rank{rank}.pt")
     dist.destroy_process_group()
 

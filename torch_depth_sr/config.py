@@ -26,6 +26,10 @@ class RestorerConfig:
     # initial estimate x⁰: "jbf" (colour-guided normalised convolution: masked joint bilateral filter,
     # remaining holes by push-pull) or "pushpull" (push-pull normalised convolution only)
     init_fill: str = "jbf"
+    # β: untrusted pixels (missing or singular) are pulled with weight β to the colour-guided estimate
+    # instead of being left to the regularisers alone (an extension of the paper; 0 = the paper's model)
+    guided_prior: float = 0.1
+    init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 7
     init_sigma_space: float = 3.0

@@ -79,6 +79,7 @@ class RestorationContext:
     config: RestorerConfig
     temperature: torch.Tensor  # scalar, positive
     color_weight: torch.Tensor  # scalar, positive
+    prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
 
     def K(self, x):
         return x if self.factor == 1 else F.avg_pool2d(x, self.factor)
@@ -148,6 +149,8 @@ class UnrolledLayer(nn.Module):
             with stage(s.timings, "singular", dev):
                 q, conf = singular_test(ctx, s.x, matches)
         rhs = ctx.Kt(q * (ctx.y - e)) + mu1 * grad_adjoint(z)
+        if ctx.prior is not None:
+            rhs = rhs + c.guided_prior * (1 - q) * ctx.prior
         if c.use_nonlocal:
             rhs = rhs + mu2 * grad_adjoint(w + alpha)
         with stage(s.timings, "cg", dev):
@@ -173,16 +176,25 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
 
 def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
             log: list) -> torch.Tensor:
-    """Solve (KᵀQK + μ DᵀD) x = rhs by preconditioned CG, warm-started at ``x0``."""
+    """Solve (KᵀQK + β(1−Q) + μ DᵀD) x = rhs by preconditioned CG, warm-started at ``x0``.
+
+    β(1−Q) is the weak pull of untrusted (missing or singular) pixels to the colour-guided estimate
+    (``config.guided_prior``; absent when there is no guide or K ≠ I).
+    """
     c = ctx.config
     q = q.detach()
 
+    beta = (c.guided_prior * (1 - q)) if ctx.prior is not None else None
+
     def apply_a(v, mu_=mu):
-        return ctx.Kt(q * ctx.K(v)) + mu_ * laplacian(v)
+        av = ctx.Kt(q * ctx.K(v)) + mu_ * laplacian(v)
+        return av if beta is None else av + beta * v
 
     precond = None
     if c.precondition:
         a = q.flatten(1).mean(1) / (ctx.factor ** 2)  # (B,)
+        if beta is not None:
+            a = a + beta.flatten(1).mean(1)
         precond = NeumannPreconditioner(a.detach(), mu.detach())
     res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=precond, tol=c.cg_tol, max_iter=c.cg_max_iter,
                    implicit=c.implicit_backward, params=(mu,) if mu.requires_grad else ())

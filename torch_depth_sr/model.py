@@ -22,7 +22,7 @@ from ._inputs import parse_depth, parse_rgb, restore_layout
 from .config import ABLATIONS, RestorerConfig
 from .errors import ShapeError
 from .fill import fill_holes
-from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, stage
+from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, singular_test, stage
 from .nonlocal_prior import nonlocal_gradient
 from .noise import depth_scale
 from .operators import grad
@@ -123,21 +123,37 @@ class DepthRestorer(nn.Module):
         c = self.config
         ctx = RestorationContext(y=yn, observed=observed, rgb=guide, factor=factor, config=c,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp())
-        x0 = initial_estimate(yn, observed, guide, factor, c)
+        guided = initial_estimate(yn, observed, guide, factor, c)  # colour-guided estimate, every pixel
+        keep = c.init_keep_observed and guided is not None
+        x0 = torch.where(observed > 0, yn, guided) if keep else guided
+        b = yn.shape[0]
+        matches, q, conf = None, observed, observed
+        timings: dict = {}
+        detect_first = c.use_singular and factor == 1 and c.init_singular and guide is not None
+        if detect_first:
+            # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
+            # those of the raw input; singular pixels start from the guided value instead of y.
+            with stage(timings, "block_matching", yn.device):
+                matches = run_block_matching(guided, ctx, observed)
+            with stage(timings, "singular", yn.device):
+                q, conf = singular_test(ctx, guided, matches)
+            x0 = torch.where(q > 0, yn, guided)
+            if c.extra.get("rematch_init", True):
+                matches = None
         if factor > 1:
             x0 = upsample_initial(x0, observed, guide, factor, c)
-        b, _, hh, ww = x0.shape
+        elif guide is not None and c.guided_prior > 0:
+            ctx.prior = guided
+        _, _, hh, ww = x0.shape
         zeros2 = x0.new_zeros(b, 2, hh, ww)
-        matches = None
         alpha = zeros2
-        timings: dict = {}
-        if c.use_nonlocal or (c.use_singular and factor == 1):
+        if matches is None and (c.use_nonlocal or (c.use_singular and factor == 1)):
             with stage(timings, "block_matching", x0.device):
                 matches = run_block_matching(x0, ctx, observed)
-            if c.use_nonlocal:
-                alpha = nonlocal_gradient(grad(x0), matches._replace(weight=match_weights(matches, ctx)))
-        state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=observed,
-                                 confidence=observed, matches=matches, cg_iterations=[], timings=timings)
+        if c.use_nonlocal:
+            alpha = nonlocal_gradient(grad(x0), matches._replace(weight=match_weights(matches, ctx)))
+        state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=q,
+                                 confidence=conf, matches=matches, cg_iterations=[], timings=timings)
         return state, ctx
 
     # ---- parameters -------------------------------------------------------------------------
@@ -183,16 +199,17 @@ class DepthRestorer(nn.Module):
 
 def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:
     """x⁰ on the observation grid: push-pull fill, or a colour-guided normalised convolution (masked JBF)."""
-    if c.init_fill == "pushpull" or guide is None:
+    if guide is None:
+        return fill_holes(yn, observed)
+    if c.init_fill == "pushpull":
         return fill_holes(yn, observed)
     if c.init_fill != "jbf":
         raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'jbf' and 'pushpull'.")
     from .baselines.jbf import joint_bilateral_filter
 
     g = guide if factor == 1 else F.avg_pool2d(guide, factor)
-    x0 = joint_bilateral_filter(yn, g, observed, kernel_size=c.init_kernel_size, sigma_space=c.init_sigma_space,
-                                sigma_color=c.init_sigma_color)
-    return torch.where(observed > 0, yn, x0) if c.init_keep_observed else x0
+    return joint_bilateral_filter(yn, g, observed, kernel_size=c.init_kernel_size, sigma_space=c.init_sigma_space,
+                                  sigma_color=c.init_sigma_color)
 
 
 def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:

@@ -17,7 +17,7 @@ import torch
 from ..config import RestorerConfig
 from ..model import DepthRestorer
 
-SEARCH = ("gamma", "singular_sigma_floor", "lam", "eta", "mu1", "mu2", "color_weight", "temperature", "init_sigma_color")
+SEARCH = ("singular_sigma_floor", "guided_prior", "lam", "eta", "mu2", "mu1", "gamma", "color_weight", "temperature")
 
 
 def fitting_samples(crop: int, n_synthetic: int = 4):

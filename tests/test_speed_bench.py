@@ -1,0 +1,86 @@
+"""Smoke test of the speed track (``torch-depth-sr bench --track speed``) at a tiny size."""
+import json
+import types
+
+import pytest
+import torch
+
+from torch_depth_sr.evaluation.speed import make_inputs, measure, run_speed
+
+
+def test_make_inputs_shapes_and_holes():
+    y, rgb, gt = make_inputs(32, 40, 2)
+    assert y.shape == (2, 1, 32, 40) and rgb.shape == (2, 3, 32, 40) and gt.shape == y.shape
+    assert bool((y == 0).any()) and bool((y[y > 0] >= 1).all())
+
+
+def test_measure_full_reports_stages_and_cg():
+    row = measure("full", 24, 32, 1, repeats=1)
+    assert row["repeats"] == 1 and row["seconds"] > 0
+    assert set(row["stages"]) == {"block_matching", "singular", "cg", "rest", "total"}
+    assert len(row["cg_iterations"]) == 8 and row["peak_mb"] is not None
+
+
+def test_run_speed_in_process_writes_json_and_table(tmp_path, capsys):
+    out = tmp_path / "speed.json"
+    args = types.SimpleNamespace(json=str(out), device="cpu", sizes="24x32", batches="1", repeats=1,
+                                 isolate=False, methods=["full", "jbf"])
+    assert run_speed(args) == 0
+    data = json.loads(out.read_text())
+    assert {"torch", "kornia", "threads", "device", "loadavg_end"} <= set(data["metadata"])
+    methods = [r["method"] for r in data["results"]]
+    assert methods == ["full", "jbf", "kornia-jbf9"]  # the kornia reference is always added
+    ref = [r for r in data["results"] if r["method"] == "kornia-jbf9"][0]
+    assert ref["ratio_to_kornia_jbf9"] == pytest.approx(1.0)
+    assert "x kornia9" in capsys.readouterr().out
+
+
+def test_run_speed_subprocess_one_method(tmp_path):
+    out = tmp_path / "speed.json"
+    args = types.SimpleNamespace(json=str(out), device="cpu", sizes="24x32", batches="1", repeats=1,
+                                 methods=["kornia-jbf9"])  # isolate defaults to True
+    assert run_speed(args) == 0
+    (row,) = json.loads(out.read_text())["results"]
+    assert "error" not in row and row["peak_mb"] is not None
+
+
+def test_unknown_method():
+    with pytest.raises(SystemExit, match="unknown speed method"):
+        run_speed(types.SimpleNamespace(json=None, device="cpu", sizes="24x32", batches="1", methods=["nope"]))
+
+
+# The speed work's fast paths against their references (they belong in test_singular.py /
+# test_solvers.py; kept here because this session may only add this test file).
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_singular_kernel_equals_torch_path(monkeypatch, dtype):
+    from torch_depth_sr.block_matching import _load_clib, block_match
+    from torch_depth_sr.singular import detect_singular
+
+    if _load_clib() is None:
+        pytest.skip("no C compiler: only the torch path exists")
+    g = torch.Generator().manual_seed(0)
+    x = (torch.randn(2, 1, 30, 36, generator=g) * 3 + 50).to(dtype)
+    y = x + torch.randn(x.shape, generator=g, dtype=dtype)
+    y[0, 0, 10, 10] += 40.0
+    obs = (torch.rand(x.shape, generator=g) > 0.1).to(dtype)
+    m = block_match(x, None, None, block_size=5, search_window=9, k=6)
+    q_c, p_c = detect_singular(y, x, obs, m, sigma_floor=1.0, return_confidence=True)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_CEXT", "1")
+    q_t, p_t = detect_singular(y, x, obs, m, sigma_floor=1.0, return_confidence=True)
+    torch.testing.assert_close(q_c, q_t)
+    torch.testing.assert_close(p_c, p_t, rtol=1e-5, atol=1e-5)
+    assert float(q_c[0, 0, 10, 10]) == 0.0
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 70, 65), (2, 3, 64, 100), (1, 1, 9, 130)])
+def test_fft_dct_equals_matrix_dct(shape):
+    from torch_depth_sr.solvers.dct import dct2, dct_matrix, idct2
+
+    x = torch.randn(shape, dtype=torch.float64)
+    ch, cw = dct_matrix(shape[-2]), dct_matrix(shape[-1])
+    torch.testing.assert_close(dct2(x), ch @ x @ cw.T)
+    torch.testing.assert_close(idct2(x), ch.T @ x @ cw)
+    xr = x.requires_grad_()
+    torch.autograd.gradcheck(lambda v: idct2(dct2(v) * 0.5), (xr[..., :9, :70],) if shape[-1] >= 70 else (xr,))
