@@ -142,3 +142,13 @@ def restore_layout(x: torch.Tensor, layout: DepthLayout) -> Any:
         info = torch.iinfo(dt)
         x = x.round().clamp(max(info.min, 0), info.max)
     return x.to(dt)
+
+
+def map_layout(x: torch.Tensor, layout: DepthLayout) -> Any:
+    """Return a float map ``x (B,1,H,W)`` (confidence, outliers) in the user's layout and array type."""
+    if layout.ndim == 2:
+        x = x[0, 0]
+    elif layout.ndim == 3:
+        x = x[0]
+    x = x.detach().to(layout.device)
+    return x.cpu().numpy().astype(np.float32) if layout.was_numpy else x

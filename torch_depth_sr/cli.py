@@ -132,6 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--per-scene", action="store_true", help="print per-scene rows")
     b.add_argument("--device", default="cpu")
     b.set_defaults(func=cmd_bench)
+
+    from .training.cli import add_train_parser
+
+    add_train_parser(sub)
     return p
 
 

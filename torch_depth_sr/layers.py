@@ -122,7 +122,7 @@ class UnrolledLayer(nn.Module):
         return F.softplus(getattr(self, "raw_" + name))
 
     def values(self) -> dict:
-        return {n: float(self.value(n)) for n in self.names}
+        return {n: float(self.value(n).detach()) for n in self.names}
 
     def forward(self, s: RestorationState, ctx: RestorationContext) -> RestorationState:
         c = ctx.config

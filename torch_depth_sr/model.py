@@ -18,7 +18,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ._inputs import parse_depth, parse_rgb, restore_layout
+from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import ABLATIONS, RestorerConfig
 from .errors import ShapeError
 from .fill import fill_holes
@@ -117,7 +117,9 @@ class DepthRestorer(nn.Module):
             return out
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
                 "cg_iterations": state.cg_iterations, "factor": factor, "seconds": dict(state.timings)}
-        return RestorationResult(out, state.confidence * observed, state.q, state.e * s4, info)
+        conf, trusted, outliers = (map_layout(t, layout) if factor == 1 else t
+                                   for t in (state.confidence * observed, state.q, state.e * s4))
+        return RestorationResult(out, conf, trusted, outliers, info)
 
     def _initial_state(self, yn, observed, guide, factor):
         c = self.config

@@ -30,7 +30,11 @@ def _samples(track: str, root, scenes, sigma):
         kw = {} if sigma is None else {"sigma": sigma}
         degrade = make_degradation(track, **kw)
         for r in records:
-            yield r, degrade(r.load())
+            sample = degrade(r.load())
+            # noise can push tiny disparities below 0; a sensor reports no negative values, so those become
+            # "no measurement" (0) for every method alike
+            sample["depth"] = sample["depth"].clamp_min(0)
+            yield r, sample
     elif track in ("upsample-a", "upsample-b"):
         for r in records:
             for f in FACTORS:
