@@ -28,7 +28,7 @@ class RestorerConfig:
     init_fill: str = "jbf"
     # β: untrusted pixels (missing or singular) are pulled with weight β to the colour-guided estimate
     # instead of being left to the regularisers alone (an extension of the paper; 0 = the paper's model)
-    guided_prior: float = 0.1
+    guided_prior: float = 0.4
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 7
@@ -47,8 +47,8 @@ class RestorerConfig:
     block_size: int = 5
     search_window: int = 21
     k: int = 10
-    color_weight: float = 100.0  # ρ: colour distance weight (colour in [0,1])
-    temperature: float = 1.0  # h: weight temperature
+    color_weight: float = 400.0  # ρ: colour distance weight (colour in [0,1])
+    temperature: float = 0.5  # h: weight temperature
     include_self: bool = False
     match_layers: tuple = (2, 5)  # layers that redo block matching on the current x (it always runs once on x⁰)
     # singular pixel detection

@@ -55,11 +55,12 @@ def score(config: RestorerConfig, samples) -> float:
     return sum(errs) / len(errs)
 
 
-def coordinate_search(config: RestorerConfig, samples, rounds: int = 2, names=SEARCH, log=print):
+def coordinate_search(config: RestorerConfig, samples, rounds: int = 2, names=SEARCH, log=print,
+                      factors_first=(0.25, 0.5, 2.0, 4.0)):
     best = score(config, samples)
     log(f"start {best:.4f}")
     for rnd in range(rounds):
-        factors = (0.25, 0.5, 2.0, 4.0) if rnd == 0 else (0.7, 1.4)
+        factors = factors_first if rnd == 0 else (0.7, 1.4)
         for name in names:
             base = getattr(config, name)
             for f in factors:
@@ -79,12 +80,13 @@ def main(argv=None):
     p.add_argument("--crop", type=int, default=160)
     p.add_argument("--names", nargs="*", default=list(SEARCH))
     p.add_argument("--start", default=None, help="JSON of config overrides to start from")
+    p.add_argument("--factors", nargs="*", type=float, default=[0.25, 0.5, 2.0, 4.0])
     args = p.parse_args(argv)
     torch.set_num_threads(max(1, torch.get_num_threads()))
     samples = fitting_samples(args.crop)
     cfg = RestorerConfig().replace(**(json.loads(args.start) if args.start else {}))
-    cfg, best = coordinate_search(cfg, samples, args.rounds, args.names)
-    print(json.dumps({n: getattr(cfg, n) for n in SEARCH}, indent=1), f"score {best:.4f}")
+    cfg, best = coordinate_search(cfg, samples, args.rounds, args.names, factors_first=tuple(args.factors))
+    print(json.dumps({n: getattr(cfg, n) for n in args.names}, indent=1), f"score {best:.4f}")
 
 
 if __name__ == "__main__":
