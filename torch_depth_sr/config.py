@@ -28,12 +28,12 @@ class RestorerConfig:
     init_fill: str = "jbf"
     # β: untrusted pixels (missing or singular) are pulled with weight β to the colour-guided estimate
     # instead of being left to the regularisers alone (an extension of the paper; 0 = the paper's model)
-    guided_prior: float = 0.4
+    guided_prior: float = 3.2
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
-    init_kernel_size: int = 7
-    init_sigma_space: float = 3.0
-    init_sigma_color: float = 0.05
+    init_kernel_size: int = 11
+    init_sigma_space: float = 6.0
+    init_sigma_color: float = 0.025
     # guided upsampling: x⁰ by joint bilateral upsampling ("jbu") or "bicubic"; the TV weight λ is divided by
     # the factor s (TV of an s-times finer grid grows like s for the same surface; the quadratic terms do not)
     upsample_init: str = "jbu"
