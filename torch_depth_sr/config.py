@@ -29,6 +29,7 @@ class RestorerConfig:
     # β: untrusted pixels (missing or singular) are pulled with weight β to the colour-guided estimate
     # instead of being left to the regularisers alone (an extension of the paper; 0 = the paper's model)
     guided_prior: float = 3.2
+    prior_on_singular: bool = True  # β also on pixels the singular test rejects (else on missing pixels only)
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 11
@@ -55,6 +56,7 @@ class RestorerConfig:
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
     singular_rounds: int = 3
+    singular_gate: float = 0.002  # a sample whose share of gross failures is below this keeps Q = measured (0 = off)
     # linear solves
     cg_tol: float = 1e-3
     cg_max_iter: int = 50
