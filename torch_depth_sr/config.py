@@ -18,10 +18,10 @@ class RestorerConfig:
     num_layers: int = 8
     # initial values of each layer's parameters (softplus-positive when trainable)
     lam: float = 1.0  # λ: TV weight
-    eta: float = 8.0  # η: nonlocal-gradient weight
+    eta: float = 2.0  # η: nonlocal-gradient weight
     gamma: float = 3.0  # γ: sparse outlier threshold
     mu1: float = 2.0  # μ₁: splitting weight for z ≈ Dx
-    mu2: float = 0.25  # μ₂: splitting weight for w ≈ Dx − α
+    mu2: float = 0.5  # μ₂: splitting weight for w ≈ Dx − α
     isotropic: bool = False  # isotropic (group) TV shrinkage instead of anisotropic
     # initial estimate x⁰: "jbf" (colour-guided normalised convolution: masked joint bilateral filter,
     # remaining holes by push-pull) or "pushpull" (push-pull normalised convolution only)
