@@ -82,5 +82,6 @@ def test_fft_dct_equals_matrix_dct(shape):
     ch, cw = dct_matrix(shape[-2]), dct_matrix(shape[-1])
     torch.testing.assert_close(dct2(x), ch @ x @ cw.T)
     torch.testing.assert_close(idct2(x), ch.T @ x @ cw)
-    xr = x.requires_grad_()
-    torch.autograd.gradcheck(lambda v: idct2(dct2(v) * 0.5), (xr[..., :9, :70],) if shape[-1] >= 70 else (xr,))
+    # gradcheck on one small FFT-path slice (rows of length >= 64 take the FFT path); full-size Jacobians are slow
+    xr = x[:1, :1, :3, :64].detach().clone().requires_grad_()
+    torch.autograd.gradcheck(lambda v: idct2(dct2(v) * 0.5), (xr,))

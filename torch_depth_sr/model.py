@@ -210,7 +210,9 @@ def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig) -> tor
     from .baselines.jbf import joint_bilateral_filter
 
     g = guide if factor == 1 else F.avg_pool2d(guide, factor)
-    return joint_bilateral_filter(yn, g, observed, kernel_size=c.init_kernel_size, sigma_space=c.init_sigma_space,
+    kernel = min(c.init_kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
+    kernel -= 1 - kernel % 2
+    return joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.init_sigma_space,
                                   sigma_color=c.init_sigma_color)
 
 
