@@ -268,3 +268,18 @@ class TestDiscover:
             find_scenes(tmp_path, "nope")
         with pytest.raises(DepthSRError, match="does not exist"):
             find_scenes(tmp_path / "absent", "paper")
+
+
+def test_require_data_root_skips_with_message(monkeypatch, tmp_path):
+    monkeypatch.setenv(ENV_VAR, str(tmp_path / "absent"))
+    with pytest.raises(pytest.skip.Exception, match=ENV_VAR):
+        require_data_root()
+
+
+def test_scene_records_pickle(tmp_path):
+    import pickle
+
+    root = require_data_root("middlebury2003")
+    rec = find_scenes(root / "middlebury2003", "paper")[0]
+    rec2 = pickle.loads(pickle.dumps(rec))
+    assert rec2.name == "Cones" and rec2.load()["scale"] == 4.0

@@ -77,7 +77,7 @@ def test_evaluate_regions():
     assert math.isclose(out["bad"], 6 / 35)
     assert out["rmse_holes"] == 4.0 and out["bad_holes"] == 1.0
     assert math.isnan(out["rmse_edges"])
-    assert out["outliers_left"] == 0.5 and out["n_outliers"] == 2
+    assert out["flying_left"] == 0.5 and out["n_outliers"] == 2
     assert evaluate(pred[None], s)["rmse"] == out["rmse"]
     plain = evaluate(pred, {"gt": gt, "scale": 5.0})
     assert plain["bad"] == 0.0 and "rmse_holes" not in plain

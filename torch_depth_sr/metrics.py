@@ -96,7 +96,7 @@ def evaluate(pred, sample: dict, outlier_threshold: float = 3.0) -> Dict[str, fl
         disparity pixel) over GT-known pixels; where region masks exist, ``rmse_holes``,
         ``mae_holes``, ``bad_holes``, ``rmse_edges``, ``mae_edges``, ``bad_edges`` (GT-known
         pixels of the region; nan if empty); where ``flying``/``impulse`` exist,
-        ``outliers_left`` = share of flying+impulse pixels left > ``outlier_threshold`` off
+        ``flying_left`` = share of flying+impulse pixels left > ``outlier_threshold`` off
         (plus ``n_outliers``).
     """
     if "gt" not in sample:
@@ -128,7 +128,7 @@ def evaluate(pred, sample: dict, outlier_threshold: float = 3.0) -> Dict[str, fl
         m = m & known
         n = int(m.sum())
         out["n_outliers"] = float(n)
-        out["outliers_left"] = float(bad_pixel_rate(pred, gt, m, outlier_threshold)) if n else math.nan
+        out["flying_left"] = float(bad_pixel_rate(pred, gt, m, outlier_threshold)) if n else math.nan
     return out
 
 
