@@ -140,8 +140,7 @@ class DepthRestorer(nn.Module):
             with stage(timings, "singular", yn.device):
                 q, conf = singular_test(ctx, guided, matches)
             x0 = torch.where(q > 0, yn, guided)
-            if c.extra.get("rematch_init", True):
-                matches = None
+            matches = None  # match again on x⁰ for the nonlocal term
         if factor > 1:
             x0 = upsample_initial(x0, observed, guide, factor, c)
         elif guide is not None and c.guided_prior > 0:

@@ -1,0 +1,23 @@
+"""gradcheck (float64) of one unrolled layer with respect to its parameters, unrolled and implicit CG."""
+import pytest
+import torch
+from torch.func import functional_call
+
+from torch_depth_sr import DepthRestorer
+
+
+@pytest.mark.parametrize("implicit", [False, True])
+def test_layer_gradcheck(implicit):
+    g = torch.Generator().manual_seed(0)
+    y = (torch.rand(1, 1, 10, 12, generator=g, dtype=torch.float64) * 20 + 50)
+    y[..., 3, 4] = 0  # a hole
+    rgb = torch.rand(1, 3, 10, 12, generator=g, dtype=torch.float64)
+    model = DepthRestorer(trainable=True, num_layers=1, search_window=5, k=3, cg_tol=1e-13, cg_max_iter=500,
+                          implicit_backward=implicit)
+    names = [f"layers.0.raw_{n}" for n in ("lam", "eta", "gamma", "mu1", "mu2")] + ["log_temperature"]
+    start = tuple(dict(model.named_parameters())[n].detach().double().clone().requires_grad_() for n in names)
+
+    def f(*params):
+        return functional_call(model, dict(zip(names, params)), (y, rgb))
+
+    assert torch.autograd.gradcheck(f, start, eps=1e-6, atol=1e-5, rtol=1e-4)
