@@ -96,7 +96,8 @@ def restore_paths(args) -> int:
             conf_dir = Path(args.confidence)
             conf_path = conf_dir / (depths[i].stem + "_confidence.png") if len(depths) > 1 or conf_dir.is_dir() \
                 else conf_dir
-            conf = (res.confidence[0, 0].cpu().numpy() * 255).round().astype(np.uint8)
+            conf_map = res.confidence.cpu().numpy() if isinstance(res.confidence, torch.Tensor) else res.confidence
+            conf = (np.asarray(conf_map).reshape(conf_map.shape[-2:]) * 255).round().astype(np.uint8)
             conf_path.parent.mkdir(parents=True, exist_ok=True)
             write_png_depth(conf_path, conf, bits=8)
         if len(depths) == 1:
