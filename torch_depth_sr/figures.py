@@ -79,7 +79,8 @@ def write_png(path, img: np.ndarray) -> Path:
     return path
 
 
-def comparison_figure(path, rgb, degraded, gt, valid, results: dict, err_max: float | None = None) -> Path:
+def comparison_figure(path, rgb, degraded, gt, valid, results: dict, err_max: float | None = None,
+                      ref_name: str = "gt") -> Path:
     """Paper Figure 4-1 layout: colour, input, GT, each method; error maps in the second row."""
     g = _np2d(gt)
     v = _np2d(valid) > 0
@@ -87,13 +88,13 @@ def comparison_figure(path, rgb, degraded, gt, valid, results: dict, err_max: fl
     vmin, vmax = float(np.percentile(vals, 0.5)), float(np.percentile(vals, 99.5))
     err_max = err_max or max((vmax - vmin) * 0.05, 1e-6)
     top = [rgb_to_bgr(rgb), depth_to_bgr(degraded, vmin, vmax), depth_to_bgr(gt, vmin, vmax, missing=~v)]
-    top_l = ["colour", "input", "ground truth"]
+    top_l = ["colour", "input", "ground truth" if ref_name == "gt" else ref_name]
     bot = [np.full_like(top[0], 255), error_to_bgr(np.where(_np2d(degraded) > 0, _np2d(degraded), 0), g, v, err_max),
            np.full_like(top[0], 255)]
-    bot_l = ["", f"|input-gt| (0..{err_max:.3g})", ""]
+    bot_l = ["", f"|input-{ref_name}| (0..{err_max:.3g})", ""]
     for name, pred in results.items():
         top.append(depth_to_bgr(pred, vmin, vmax))
         top_l.append(name)
         bot.append(error_to_bgr(pred, g, v, err_max))
-        bot_l.append(f"|{name}-gt|")
+        bot_l.append(f"|{name}-{ref_name}|")
     return write_png(path, mosaic([top, bot], [top_l, bot_l]))

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from ..fill import fill_holes
 from .methods import DENOISE_METHODS, UPSAMPLE_METHODS, run_method
 
 FACTORS = (2, 4, 8, 16)
@@ -89,7 +90,7 @@ def run_bench(args) -> int:
     bar.close()
     summary = summarise(results, args.track)
     cols = ["method"] + (["scale"] if upsampling else []) + [c for c in ("rmse", "mae", "bad", "rmse_holes",
-                                                                          "rmse_edges", "flying_left", "holes_out",
+                                                                          "rmse_edges", "flying_left", "holes_in", "holes_out",
                                                                           "wins_vs_jbf", "seconds") if
                                                                any(c in r for r in summary)]
     title = f"track {args.track}: mean over {len({r['scene'] for r in results})} scene(s)"
@@ -117,7 +118,7 @@ def summarise(results: list[dict], track: str) -> list[dict]:
         agg = {"method": m}
         if track.startswith("upsample"):
             agg["scale"] = int(s)
-        for c in ("rmse", "mae", "bad", "rmse_holes", "rmse_edges", "flying_left", "holes_out", "seconds"):
+        for c in ("rmse", "mae", "bad", "rmse_holes", "rmse_edges", "flying_left", "holes_in", "holes_out", "seconds"):
             vals = [r[c] for r in rows if r.get(c) is not None and not (isinstance(r[c], float) and math.isnan(r[c]))]
             if vals:
                 agg[c] = float(np.mean(vals))
@@ -145,10 +146,12 @@ def _save_extras(args, rec, sample: dict, preds: dict) -> None:
     if getattr(args, "figures", None):
         from ..figures import comparison_figure
 
-        gt = sample.get("gt", preds[next(iter(preds))][0])
-        valid = sample.get("mask", (gt > 0).float())
+        has_gt = "gt" in sample
+        # without ground truth (track real) the reference panel is the input with holes filled (push-pull)
+        gt = sample["gt"] if has_gt else fill_holes(sample["depth"][None], (sample["depth"][None] > 0).float())[0]
+        valid = sample["mask"] if has_gt else torch.ones_like(gt)
         deg = sample["depth"]
         if deg.shape[-2:] != gt.shape[-2:]:
             deg = torch.nn.functional.interpolate(deg[None], size=gt.shape[-2:], mode="nearest")[0]
         comparison_figure(Path(args.figures) / f"{args.track}_{name}.png", sample["rgb"], deg, gt, valid,
-                          {k: v for k, v in preds.items() if k != "input"})
+                          {k: v for k, v in preds.items() if k != "input"}, ref_name="gt" if has_gt else "filled")
