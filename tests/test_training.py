@@ -149,3 +149,16 @@ def test_example_train_unrolled(tmp_path):
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "train_unrolled.py"), "--steps", "2", "--crop", "32",
                         "--out", str(tmp_path), "--tiny"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
+
+
+def test_example_restore_in_dataloader():
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "restore_in_dataloader.py"), "--workers", "2",
+                        "--frames", "2", "--size", "48", "64"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+def test_example_quickstart():
+    r = subprocess.run([sys.executable, str(ROOT / "examples" / "quickstart.py")], capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0 and "restored RMSE" in r.stdout, r.stderr[-2000:]
