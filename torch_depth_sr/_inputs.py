@@ -14,8 +14,6 @@ import torch
 
 from .errors import DTypeError, InvalidDepthError, ShapeError
 
-_DEPTH_INT_DTYPES = (torch.uint8, torch.uint16, torch.int16, torch.int32, torch.int64)
-
 
 @dataclass(frozen=True)
 class DepthLayout:
@@ -66,7 +64,7 @@ def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch
         raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.")
     if t.shape[0] == 0 or t.shape[-1] == 0 or t.shape[-2] == 0:
         raise ShapeError(f"depth is empty: shape {tuple(t.shape)}.")
-    y = t.to(compute_dtype) if t.is_floating_point() or t.dtype in _DEPTH_INT_DTYPES else t.to(compute_dtype)
+    y = t.to(compute_dtype)
     finite_or_nan = torch.isfinite(y) | torch.isnan(y)
     if not bool(finite_or_nan.all()):
         raise InvalidDepthError("depth contains +/-inf; allowed are finite values, with 0 or NaN for "

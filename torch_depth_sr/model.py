@@ -93,8 +93,6 @@ class DepthRestorer(nn.Module):
         b, _, h, w = y.shape
         guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
         factor = _infer_factor(y, guide, scale_factor)
-        if guide is None and (self.config.use_nonlocal or self.config.use_singular):
-            guide = None  # depth-only block matching
         bs = self.config.block_size
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
@@ -200,9 +198,7 @@ class DepthRestorer(nn.Module):
 
 def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:
     """x⁰ on the observation grid: push-pull fill, or a colour-guided normalised convolution (masked JBF)."""
-    if guide is None:
-        return fill_holes(yn, observed)
-    if c.init_fill == "pushpull":
+    if guide is None or c.init_fill == "pushpull":
         return fill_holes(yn, observed)
     if c.init_fill != "jbf":
         raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'jbf' and 'pushpull'.")
