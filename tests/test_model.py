@@ -93,6 +93,20 @@ class TestDepthRestorer:
         out = restore_depth(lr, scene["rgb"], **SMALL)
         assert out.shape == gt.shape and torch.isfinite(out).all()
 
+    def test_upsample_scale_applies_only_when_upsampling(self, scene):
+        gt = scene["gt"][..., :48, :64]
+        lr = torch.nn.functional.avg_pool2d(gt, 2)
+        plain = restore_depth(lr, scene["rgb"][..., :48, :64], **SMALL, upsample_scale={})
+        scaled = restore_depth(lr, scene["rgb"][..., :48, :64], **SMALL, upsample_scale={"mu1": 3.0, "mu2": 3.0})
+        assert not torch.allclose(plain, scaled)
+        same = [restore_depth(scene["depth"], scene["rgb"], **SMALL, upsample_scale=u) for u in ({}, {"mu1": 5.0})]
+        torch.testing.assert_close(same[0], same[1])
+
+    @pytest.mark.parametrize("bad", [{"tau": 2.0}, {"mu1": 0.0}, {"lam": -1.0}])
+    def test_upsample_scale_rejects_unknown_or_nonpositive(self, bad):
+        with pytest.raises(ValueError, match="upsample_scale"):
+            RestorerConfig(upsample_scale=bad)
+
     def test_depth_only(self, scene):
         out = restore_depth(scene["depth"], None, **SMALL)
         assert torch.isfinite(out).all()

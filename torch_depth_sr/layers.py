@@ -129,8 +129,12 @@ class UnrolledLayer(nn.Module):
         c = ctx.config
         dt = s.x.dtype
         lam, eta, gamma, mu1, mu2 = (self.value(n).to(dt) for n in self.names)
-        if ctx.factor > 1 and c.upsample_tv_per_factor:
-            lam = lam / ctx.factor
+        if ctx.factor > 1:
+            scale = c.upsample_scale
+            lam, eta, gamma, mu1, mu2 = (v * float(scale.get(n, 1.0))
+                                         for n, v in zip(self.names, (lam, eta, gamma, mu1, mu2)))
+            if c.upsample_tv_per_factor:
+                lam = lam / ctx.factor
         shrink = group_soft_threshold if c.isotropic else soft_threshold
         dx = grad(s.x)  # (B,2,H,W)
         z = shrink(dx, lam / mu1)
