@@ -91,3 +91,20 @@ def test_full_beats_jbf_on_two_scenes(root, track):
         crop["depth"] = crop["depth"].clamp_min(0)
         errs = {m: float(rmse(run_method(m, crop), crop["gt"][None], crop["mask"][None])[0]) for m in ("jbf", "full")}
         assert errs["full"] < errs["jbf"], (track, name, errs)
+
+
+class TestUpsamplingFittingSet:
+    def test_seeded_area_downsampled_2006_only(self, root):
+        from torch_depth_sr.evaluation.tune_upsampling import upsampling_fitting_samples
+
+        a, b = upsampling_fitting_samples(), upsampling_fitting_samples()
+        assert len(a) == 22 and {s["factor"] for s in a} == {2, 4}
+        for s, t in zip(a, b):
+            assert torch.equal(s["depth"], t["depth"])
+            f = s["factor"]
+            assert s["depth"].shape[-2:] == (s["gt"].shape[-2] // f, s["gt"].shape[-1] // f)
+            assert s["depth"].min() >= 0 and s["depth"].max() <= 255 and torch.equal(s["depth"], s["depth"].round())
+            # the input is the area average of the ground truth plus sigma = 5 noise, not point samples
+            m = torch.nn.functional.avg_pool2d(s["mask"], f) == 1
+            r = (s["depth"] - torch.nn.functional.avg_pool2d(s["gt"], f))[m]
+            assert 4.5 < float(r.std()) < 5.5 and abs(float(r.mean())) < 0.2
