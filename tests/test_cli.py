@@ -1,6 +1,10 @@
 """The command line on files: restore keeps names, dtype and units; a folder goes through a DataLoader."""
+import json
+
 import cv2
 import numpy as np
+import pytest
+import torch
 
 from torch_depth_sr.cli import main
 from torch_depth_sr.datasets.synthetic import make_scene
@@ -40,3 +44,19 @@ def test_demo_writes_json_and_figure(tmp_path):
                  "--width", "80"]) == 0
     d = json.loads((tmp_path / "d.json").read_text())
     assert {r["method"] for r in d["results"]} == {"input", "tv", "full"} and (tmp_path / "demo.png").exists()
+
+
+def test_bench_config_overrides_reach_the_model_and_bad_ones_are_refused():
+    from torch_depth_sr.datasets.synthetic import make_scene
+    from torch_depth_sr.evaluation.bench import _parse_config
+    from torch_depth_sr.evaluation.methods import run_method
+
+    s = make_scene(40, 40, seed=3)
+    sample = {"depth": s["gt"] + 0.5 * torch.randn_like(s["gt"]), "rgb": s["rgb"]}
+    small = {"num_layers": 2, "search_window": 7, "k": 4}
+    a = run_method("full", sample, config=_parse_config(json.dumps(small)))
+    b = run_method("full", sample, config={**small, "block_size": 5})
+    assert a.shape == (1, 1, 40, 40) and not torch.equal(a, b)
+    for bad in ('{"block_sise": 5}', "[1, 2]", "{not json"):
+        with pytest.raises(SystemExit, match="--config"):
+            _parse_config(bad)

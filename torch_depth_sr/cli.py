@@ -131,6 +131,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--save-inputs", default=None)
     b.add_argument("--per-scene", action="store_true", help="print per-scene rows")
     b.add_argument("--device", default="cpu")
+    b.add_argument("--config", default=None,
+                   help='JSON of RestorerConfig overrides for tv, tv+nl, full (e.g. \'{"block_size": 5}\')')
     b.set_defaults(func=cmd_bench)
 
     from .training.cli import add_train_parser

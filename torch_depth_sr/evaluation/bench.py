@@ -58,6 +58,25 @@ def _metrics(pred: torch.Tensor, sample: dict, track: str) -> dict:
     return {k: (float(v) if v is not None else None) for k, v in evaluate(pred, sample).items()}
 
 
+def _parse_config(text):
+    """``--config`` JSON of RestorerConfig overrides, checked before any scene runs."""
+    if not text:
+        return None
+    from ..config import RestorerConfig
+
+    try:
+        overrides = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise SystemExit(f"--config must be a JSON object of RestorerConfig overrides; got {text!r} ({e}).")
+    if not isinstance(overrides, dict):
+        raise SystemExit(f"--config must be a JSON object of RestorerConfig overrides; got {text!r}.")
+    try:
+        RestorerConfig.from_dict(overrides)
+    except (TypeError, ValueError) as e:
+        raise SystemExit(f"--config: {e}")
+    return overrides
+
+
 def run_bench(args) -> int:
     from .._data_root import data_root
     from ..cli import _metadata, _print_table
@@ -71,6 +90,7 @@ def run_bench(args) -> int:
     methods = args.methods or list(UPSAMPLE_METHODS if upsampling else DENOISE_METHODS)
     if args.track == "real":
         methods = args.methods or ["input", "jbf", "full"]
+    config = _parse_config(getattr(args, "config", None))
     results = []
     items = list(_samples(args.track, root, args.scenes, args.sigma))
     bar = tqdm(total=len(items) * len(methods), desc=f"bench {args.track}", unit="run")
@@ -78,7 +98,7 @@ def run_bench(args) -> int:
         preds = {}
         for m in methods:
             t0 = time.perf_counter()
-            pred = run_method(m, sample, args.device).cpu()
+            pred = run_method(m, sample, args.device, config).cpu()
             secs = time.perf_counter() - t0
             preds[m] = pred
             row = {"track": args.track, "scene": rec.name, "dataset": rec.dataset, "method": m,
@@ -102,7 +122,7 @@ def run_bench(args) -> int:
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         meta = _metadata(args.device)
-        meta.update(track=args.track, sigma=args.sigma, data=str(root))
+        meta.update(track=args.track, sigma=args.sigma, data=str(root), config_overrides=config or {})
         Path(args.json).write_text(json.dumps({"metadata": meta, "summary": summary, "results": results}, indent=1))
         print(f"json: {args.json}")
     return 0

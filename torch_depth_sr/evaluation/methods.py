@@ -5,7 +5,9 @@ README); the model's come from :class:`~torch_depth_sr.RestorerConfig` defaults,
 """
 from __future__ import annotations
 
+import json
 from functools import lru_cache
+from typing import Optional
 
 import torch
 
@@ -22,18 +24,22 @@ DICTIONARY_PARAMS = dict(patch_size=8, n_atoms=128, stride=4)
 
 
 @lru_cache(maxsize=None)
-def _model(name: str, device: str):
+def _model(name: str, device: str, overrides: str = "{}"):
     from ..model import DepthRestorer
 
     if name == "trained":
         return DepthRestorer.from_pretrained("denoise").to(device)
     if name == "trained-x4":
         return DepthRestorer.from_pretrained("upsample-x4").to(device)
-    return DepthRestorer.ablation(name).to(device)
+    return DepthRestorer.ablation(name, **json.loads(overrides)).to(device)
 
 
-def run_method(name: str, sample: dict, device: str = "cpu") -> torch.Tensor:
-    """Run ``name`` on a sample dict (``depth (1,h,w)``, ``rgb (3,H,W)``, optional ``factor``)."""
+def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[dict] = None) -> torch.Tensor:
+    """Run ``name`` on a sample dict (``depth (1,h,w)``, ``rgb (3,H,W)``, optional ``factor``).
+
+    ``config``: :class:`~torch_depth_sr.RestorerConfig` overrides for the model methods (``tv``, ``tv+nl``,
+    ``full``), e.g. ``{"block_size": 5}``; the shipped ``trained`` parameters and the baselines ignore it.
+    """
     y = sample["depth"][None].to(device)
     rgb = sample["rgb"][None].to(device)
     factor = int(sample.get("factor", 1) or 1)
@@ -56,6 +62,6 @@ def run_method(name: str, sample: dict, device: str = "cpu") -> torch.Tensor:
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
         if name in ("tv", "tv+nl", "full", "trained", "trained-x4"):
-            return _model(name, device)(y, rgb)
+            return _model(name, device, json.dumps(config or {}, sort_keys=True))(y, rgb)
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
                      "and 'trained'.")
