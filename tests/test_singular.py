@@ -87,3 +87,28 @@ def test_errors():
         detect_singular(y, x, obs, m, sigma_floor=0.5, rounds=0)
     with pytest.raises(ShapeError, match="matches"):
         detect_singular(y[..., :20, :], x[..., :20, :], obs[..., :20, :], m, sigma_floor=0.5)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_compiled_kernel_matches_torch_path(monkeypatch, dtype, threads):
+    from torch_depth_sr.block_matching import _load_clib
+
+    if _load_clib() is None:
+        pytest.skip("no C compiler here: only the torch path exists")
+    x, y, _ = _scene(seed=4, b=2, noise=1.0)
+    x, y = x.to(dtype), y.to(dtype)
+    x = x + 0.3 * (y - x)  # an estimate that still carries some of the outliers
+    obs = (torch.rand(y.shape, generator=torch.Generator().manual_seed(1)) > 0.1).to(dtype)
+    m = block_match(x, None, None, block_size=3, search_window=9, k=6)
+    old = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        qc, pc = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True)
+        monkeypatch.setenv("TORCH_DEPTH_SR_NO_CEXT", "1")
+        qt, pt = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True)
+    finally:
+        torch.set_num_threads(old)
+    assert 0 < float((qt == 0).sum() - (obs == 0).sum())  # the test does reject some observed pixels
+    assert (qc != qt).float().mean() <= (0 if dtype == torch.float64 else 1e-3)
+    torch.testing.assert_close(pc, pt, atol=1e-5, rtol=1e-4)

@@ -508,49 +508,42 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
 """
 
 _C_TEMPLATE += r"""
-/* Singular-pixel test of singular.py, all rounds fused, for one sample (HW pixels, k matches).
-   y0: observation (0 where missing), obs: 1/0, x: current estimate, idx: (k, HW) flat centres,
-   w0: (k, HW) weights; q (out, {0,1}) and p (out, confidence); qtmp: HW scratch.
-   Returns the number of rounds run. Same arithmetic as the torch path, pixel by pixel. */
-int singular_SFX(const REAL* y0, const uint8_t* obs, const REAL* x, const int64_t* idx, const REAL* w0,
-                 int64_t HW, int k, REAL floor_, REAL tau, int rounds, REAL* q, REAL* p, REAL* qtmp)
+/* One round of the singular-pixel test of singular.py for pixels [i0, i1) of one sample (HW pixels,
+   k matches). y0: observation (0 where missing), obs: 1/0, x: current estimate, idx: (k, HW) flat
+   centres, w0: (k, HW) weights; qo: Q of the previous round (read), qn, p (out, for [i0, i1)).
+   Returns the number of pixels whose Q changed. Same arithmetic as the torch path, pixel by pixel;
+   rounds are separate calls so that threads can split the pixels of a round. */
+int64_t singular_round_SFX(const REAL* y0, const uint8_t* obs, const REAL* x, const int64_t* idx, const REAL* w0,
+                           int64_t HW, int k, REAL floor_, REAL tau, const REAL* qo, REAL* qn, REAL* p,
+                           int64_t i0, int64_t i1)
 {
     if (k > KMAX) return -1;
-    REAL* qo = q; REAL* qn = qtmp;
-    for (int64_t i = 0; i < HW; ++i) qo[i] = obs[i] ? 1 : 0;
-    int done = 0;
-    for (int rd = 0; rd < rounds; ++rd) {
-        int changed = 0;
-        for (int64_t i = 0; i < HW; ++i) {
-            if (!obs[i]) { p[i] = 0; qn[i] = 0; continue; }
-            REAL s = 0, wm[KMAX], xm[KMAX];
-            for (int m = 0; m < k; ++m) {
-                const int64_t j = idx[(int64_t)m * HW + i];
-                wm[m] = w0[(int64_t)m * HW + i]; xm[m] = x[j];
-                s += wm[m] * qo[j];
-            }
-            if (s > 0) {
-                const REAL inv = 1 / s;
-                for (int m = 0; m < k; ++m) wm[m] *= qo[idx[(int64_t)m * HW + i]] * inv;
-            }
-            REAL mu = 0;
-            for (int m = 0; m < k; ++m) mu += wm[m] * xm[m];
-            REAL var = 0;
-            for (int m = 0; m < k; ++m) { const REAL d = xm[m] - mu; var += wm[m] * d * d; }
-            REAL sg = var > 0 ? (REAL)sqrt((double)var) : 0;
-            if (sg < floor_) sg = floor_;
-            const REAL r = y0[i] - mu;
-            const REAL pi = (REAL)exp(-(double)(r * r) / (double)(2 * sg * sg));
-            p[i] = pi;
-            qn[i] = pi >= tau ? 1 : 0;
-            changed |= qn[i] != qo[i];
+    int64_t changed = 0;
+    for (int64_t i = i0; i < i1; ++i) {
+        if (!obs[i]) { p[i] = 0; qn[i] = 0; changed += qo[i] != 0; continue; }
+        REAL s = 0, wm[KMAX], xm[KMAX];
+        for (int m = 0; m < k; ++m) {
+            const int64_t j = idx[(int64_t)m * HW + i];
+            wm[m] = w0[(int64_t)m * HW + i]; xm[m] = x[j];
+            s += wm[m] * qo[j];
         }
-        REAL* t = qo; qo = qn; qn = t;
-        ++done;
-        if (!changed) break;
+        if (s > 0) {
+            const REAL inv = 1 / s;
+            for (int m = 0; m < k; ++m) wm[m] *= qo[idx[(int64_t)m * HW + i]] * inv;
+        }
+        REAL mu = 0;
+        for (int m = 0; m < k; ++m) mu += wm[m] * xm[m];
+        REAL var = 0;
+        for (int m = 0; m < k; ++m) { const REAL d = xm[m] - mu; var += wm[m] * d * d; }
+        REAL sg = var > 0 ? (REAL)sqrt((double)var) : 0;
+        if (sg < floor_) sg = floor_;
+        const REAL r = y0[i] - mu;
+        const REAL pi = (REAL)exp(-(double)(r * r) / (double)(2 * sg * sg));
+        p[i] = pi;
+        qn[i] = pi >= tau ? 1 : 0;
+        changed += qn[i] != qo[i];
     }
-    if (qo != q) for (int64_t i = 0; i < HW; ++i) q[i] = qo[i];
-    return done;
+    return changed;
 }
 """
 
@@ -611,11 +604,11 @@ def _load_clib():
         fn = getattr(lib, name)
         fn.restype = i32
         fn.argtypes = [vp, vp, vp, i32, i64, i64, i32, i32, i32, i32, vp, i32, i32, dbl, i32, i32, vp, vp]
-    for name in ("singular_f32", "singular_f64"):
+    for name in ("singular_round_f32", "singular_round_f64"):
         fn = getattr(lib, name)
-        fn.restype = i32
-        fn.argtypes = [vp, vp, vp, vp, vp, i64, i32, dbl if name.endswith("64") else ctypes.c_float,
-                       dbl if name.endswith("64") else ctypes.c_float, i32, vp, vp, vp]
+        fn.restype = i64
+        real = dbl if name.endswith("64") else ctypes.c_float
+        fn.argtypes = [vp, vp, vp, vp, vp, i64, i32, real, real, vp, vp, vp, i64, i64]
     _CLIB = lib
     return lib
 

@@ -48,11 +48,12 @@ def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
 
 def _detect_singular_c(y0, obs, xv, matches: BlockMatches, floor, tau: float, rounds: int
                        ) -> Optional[Tuple[torch.Tensor, torch.Tensor]]:
-    """All rounds in one pass of the compiled kernel (CPU, float32/64); None where it does not apply.
+    """The test by the compiled kernel (CPU, float32/64); None where it does not apply.
 
     The torch path below makes ~30 passes over ``(B, k, H, W)`` tensors per round; the kernel reads
     the k matches of a pixel once per round (about 40× faster at 640×480). Same arithmetic,
-    pixel by pixel, so ``Q`` and ``P`` agree with the torch path to float round-off.
+    pixel by pixel, so ``Q`` and ``P`` agree with the torch path to float round-off. Each round's
+    pixels are split into row bands across ``torch.get_num_threads()`` threads.
     """
     from .block_matching import _load_clib
 
@@ -63,31 +64,43 @@ def _detect_singular_c(y0, obs, xv, matches: BlockMatches, floor, tau: float, ro
     if lib is None:
         return None
     b, _, h, w = y0.shape
+    hw = h * w
     k = matches.index.shape[1]
     dt = y0.dtype
-    fn = lib.singular_f64 if dt == torch.float64 else lib.singular_f32
+    fn = lib.singular_round_f64 if dt == torch.float64 else lib.singular_round_f32
     y0c = y0.contiguous()
     xc = xv.contiguous()
     obs8 = obs.to(torch.uint8).contiguous()
     idx = matches.index.detach().to(torch.int64).contiguous()  # (B, k, H, W)
     w0 = matches.weight.detach().to(dt).contiguous()  # (B, k, H, W)
-    q = torch.empty_like(y0c)
+    q_prev = obs.to(dt).contiguous()
+    q_next = torch.empty_like(y0c)
     p = torch.empty_like(y0c)
-    tmp = torch.empty_like(y0c)
     fl = floor.reshape(-1).tolist()
+    workers = max(1, min(torch.get_num_threads(), os.cpu_count() or 1))
+    bands = max(1, min(h, 4 * workers if workers > 1 else 1))
+    cuts = [round(t * h / bands) * w for t in range(bands + 1)]
+    jobs = [(i, cuts[t], cuts[t + 1]) for i in range(b) for t in range(bands) if cuts[t + 1] > cuts[t]]
+    pool = ThreadPoolExecutor(max_workers=workers) if workers > 1 and len(jobs) > 1 else None
 
-    def run(i):
-        fn(y0c[i].data_ptr(), obs8[i].data_ptr(), xc[i].data_ptr(), idx[i].data_ptr(), w0[i].data_ptr(),
-           h * w, k, fl[i], tau, rounds, q[i].data_ptr(), p[i].data_ptr(), tmp[i].data_ptr())
+    def run(job):
+        i, i0, i1 = job
+        n = fn(y0c[i].data_ptr(), obs8[i].data_ptr(), xc[i].data_ptr(), idx[i].data_ptr(), w0[i].data_ptr(),
+               hw, k, fl[i], tau, q_prev[i].data_ptr(), q_next[i].data_ptr(), p[i].data_ptr(), i0, i1)
+        if n < 0:
+            raise DepthSRError(f"singular kernel refused k={k} matches (at most 256).")
+        return n
 
-    workers = max(1, min(b, torch.get_num_threads()))
-    if workers > 1:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            list(pool.map(run, range(b)))
-    else:
-        for i in range(b):
-            run(i)
-    return q, p
+    try:
+        for _ in range(rounds):
+            changed = sum(pool.map(run, jobs)) if pool is not None else sum(map(run, jobs))
+            q_prev, q_next = q_next, q_prev
+            if changed == 0:
+                break
+    finally:
+        if pool is not None:
+            pool.shutdown()
+    return q_prev, p
 
 
 def detect_singular(
