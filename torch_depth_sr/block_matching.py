@@ -418,9 +418,12 @@ static void insert_SFX(REAL v, int32_t id, REAL* td, int32_t* ti, int k) {
    xp, tp, cp: planes padded by r (replicate) then R (zeros), row stride Wp; tp/cp may be NULL.
    order: the no offset ids (dy+R)*S + (dx+R) to visit (centre first, so that the running k-th
    distance is tight early and few candidates need an insertion). Keys are compared as
-   (distance, id), so ties go to the smaller id whatever the visiting order. */
+   (distance, id), so ties go to the smaller id whatever the visiting order.
+   both (may be NULL): both[io] = 1 for an offset o with dy > 0 (or dy = 0, dx > 0) whose mirror -o is
+   not in order: the block distance is symmetric, d(p, p+o) = d(p+o, p), so each one computed for p
+   is also offered to pixel p+o under the id of -o, and the mirrored offsets are never computed. */
 int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t Hp, int64_t Wp,
-                int H, int W, int r, int R, const int32_t* order, int no, int k, double rho,
+                int H, int W, int r, int R, const int32_t* order, const int8_t* both, int no, int k, double rho,
                 int h0, int h1, REAL* topd, int32_t* topi)
 {
     const int bs = 2 * r + 1, S = 2 * R + 1, U = W + 2 * r, rows = h1 - h0;
@@ -436,7 +439,18 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
     for (int io = 0; io < no; ++io) {
         const int32_t oid = order[io];
         const int dy = oid / S - R, dx = oid % S - R;
-        const int i0 = h0 > -dy ? h0 : -dy, i1 = h1 < H - dy ? h1 : H - dy;
+        const int32_t mid = (R - dy) * S + (R - dx);
+        const int f0 = h0 > -dy ? h0 : -dy, f1 = h1 < H - dy ? h1 : H - dy;  /* rows of p in the chunk */
+        int i0 = f0, i1 = f1;
+        int m0 = 0, m1 = 0;  /* rows i whose mirrored pixel (i+dy, j+dx) is in the chunk (dy >= 0) */
+        if (both && both[io]) {
+            m0 = h0 - dy > 0 ? h0 - dy : 0;
+            m1 = h1 - dy < H - dy ? h1 - dy : H - dy;
+            if (m1 > m0) {
+                if (f1 <= f0) { i0 = m0; i1 = m1; }
+                else { i0 = i0 < m0 ? i0 : m0; i1 = i1 > m1 ? i1 : m1; }
+            }
+        }
         if (i1 <= i0) continue;
         {
             const int j0 = dx < 0 ? -dx : 0, j1 = dx > 0 ? W - dx : W;
@@ -476,8 +490,6 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
                     for (int s2 = 1; s2 < bs; ++s2)
                         for (int u = 0; u < U; ++u) cs[u] += rb[(size_t)s2 * U + u];
                 }
-                REAL* td = topd + (int64_t)(i - h0) * W * k;
-                int32_t* ti = topi + (int64_t)(i - h0) * W * k;
                 for (int j = j0; j < j1; ++j) dd[j] = col[j];
                 for (int q = 1; q < bs; ++q)
                     for (int j = j0; j < j1; ++j) dd[j] += col[j + q];
@@ -493,11 +505,26 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
                         dd[j] = dd[j] / (s1 > 1 ? s1 : 1) + crho * s2;
                     }
                 }
-                for (int j = j0; j < j1; ++j) {
-                    const REAL d = dd[j] > 0 ? dd[j] : 0;
-                    REAL* tdj = td + (int64_t)j * k;
-                    int32_t* tij = ti + (int64_t)j * k;
-                    if (d < tdj[k - 1] || (d == tdj[k - 1] && oid < tij[k - 1])) insert_SFX(d, oid, tdj, tij, k);
+                for (int j = j0; j < j1; ++j) dd[j] = dd[j] > 0 ? dd[j] : 0;
+                if (i >= f0 && i < f1) {
+                    REAL* td = topd + (int64_t)(i - h0) * W * k;
+                    int32_t* ti = topi + (int64_t)(i - h0) * W * k;
+                    for (int j = j0; j < j1; ++j) {
+                        const REAL d = dd[j];
+                        REAL* tdj = td + (int64_t)j * k;
+                        int32_t* tij = ti + (int64_t)j * k;
+                        if (d < tdj[k - 1] || (d == tdj[k - 1] && oid < tij[k - 1])) insert_SFX(d, oid, tdj, tij, k);
+                    }
+                }
+                if (i >= m0 && i < m1) {
+                    REAL* tdm = topd + ((int64_t)(i + dy - h0) * W + dx) * k;
+                    int32_t* tim = topi + ((int64_t)(i + dy - h0) * W + dx) * k;
+                    for (int j = j0; j < j1; ++j) {
+                        const REAL d = dd[j];
+                        REAL* tdj = tdm + (int64_t)j * k;
+                        int32_t* tij = tim + (int64_t)j * k;
+                        if (d < tdj[k - 1] || (d == tdj[k - 1] && mid < tij[k - 1])) insert_SFX(d, mid, tdj, tij, k);
+                    }
                 }
             }
         }
@@ -603,7 +630,7 @@ def _load_clib():
     for name in ("bm_rows_f32", "bm_rows_f64"):
         fn = getattr(lib, name)
         fn.restype = i32
-        fn.argtypes = [vp, vp, vp, i32, i64, i64, i32, i32, i32, i32, vp, i32, i32, dbl, i32, i32, vp, vp]
+        fn.argtypes = [vp, vp, vp, i32, i64, i64, i32, i32, i32, i32, vp, vp, i32, i32, dbl, i32, i32, vp, vp]
     for name in ("singular_round_f32", "singular_round_f64"):
         fn = getattr(lib, name)
         fn.restype = i64
@@ -620,6 +647,27 @@ def _offset_order(search_window: int, stride: int, include_self: bool) -> np.nda
             for dy in _lattice(big_r, stride) for dx in _lattice(big_r, stride)
             if include_self or dy != 0 or dx != 0]
     return np.array([o for _, o in sorted(offs)], dtype=np.int32)
+
+
+def _symmetric_order(order: np.ndarray, search_window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Keep one offset of each mirrored pair (the one with dy > 0, or dy = 0 and dx > 0), flagged ``both``.
+
+    The block distance is symmetric, so the kernel offers each distance computed for ``(p, p+o)`` to
+    pixel ``p+o`` as its candidate ``-o`` too: half the offsets, the same matches.
+    """
+    big_r = search_window // 2
+    ids = set(order.tolist())
+    keep, both = [], []
+    for o in order.tolist():
+        dy, dx = o // search_window - big_r, o % search_window - big_r
+        mirror = (big_r - dy) * search_window + (big_r - dx)
+        if mirror == o or mirror not in ids:
+            keep.append(o)
+            both.append(0)
+        elif dy > 0 or (dy == 0 and dx > 0):
+            keep.append(o)
+            both.append(1)
+    return np.array(keep, dtype=np.int32), np.array(both, dtype=np.int8)
 
 
 def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride):
@@ -641,7 +689,7 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
         for h0 in range(0, h, chunk_rows):
             jobs.append((b, h0, min(h, h0 + chunk_rows)))
     topd = np.empty((bsz, h * w, k), dtype=npdt)
-    order = _offset_order(search_window, stride, include_self)
+    order, both = _symmetric_order(_offset_order(search_window, stride, include_self), search_window)
     topi = np.empty((bsz, h * w, k), dtype=np.int32)
 
     def run(job):
@@ -650,7 +698,7 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
         td, ti = topd[b, h0 * w:h1 * w], topi[b, h0 * w:h1 * w]
         rc = fn(xp.ctypes.data, None if tp is None else tp.ctypes.data, None if cp is None else cp.ctypes.data,
                 0 if cp is None else cp.shape[0], xp.shape[0], xp.shape[1], h, w, r, big_r, order.ctypes.data,
-                len(order), k, rb, h0, h1, td.ctypes.data, ti.ctypes.data)
+                both.ctypes.data, len(order), k, rb, h0, h1, td.ctypes.data, ti.ctypes.data)
         if rc != 0:
             raise MemoryError("block matching kernel could not allocate its row buffers")
 
