@@ -677,7 +677,9 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
     npdt = np.float64 if f64 else np.float32
     fn = lib.bm_rows_f64 if f64 else lib.bm_rows_f32
     if chunk_rows is None:
-        chunk_rows = 8  # the chunk's running top-k (8·W·k values) stays in the L2 cache
+        # taller chunks share more of each mirrored offset pair's rows (measured at 640×480, 2 threads:
+        # 8 rows 0.67 s, 16 rows 0.65 s, 32 rows 0.50 s per run)
+        chunk_rows = 32
     samples, jobs = [], []
     for b in range(bsz):
         xp = np.ascontiguousarray(_pad_plane(depth[b, 0].cpu().numpy().astype(npdt, copy=False), r, big_r))
@@ -712,7 +714,7 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
     dist = torch.from_numpy(topd).permute(0, 2, 1).reshape(bsz, k, h, w).to(depth.dtype)  # (B, k, H, W)
     del topd
     index = _index_from_offsets(torch.from_numpy(topi).view(bsz, h, w, k).permute(0, 3, 1, 2), search_window, h, w)
-    return dist.contiguous(), index
+    return dist.contiguous(), index.contiguous()  # (B, k, H, W) contiguous: every layer's gathers read it
 
 
 # ----------------------------------------------------------------------------------------------
