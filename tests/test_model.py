@@ -107,6 +107,16 @@ class TestDepthRestorer:
         with pytest.raises(ValueError, match="upsample_scale"):
             RestorerConfig(upsample_scale=bad)
 
+    def test_fast_preset_is_close_to_the_default_and_overridable(self, scene):
+        fast = DepthRestorer.preset("fast")
+        assert fast.config.search_window == 11 and fast.config.match_layers == (2,)
+        assert DepthRestorer.preset("fast", k=6).config.k == 6
+        a = rmse(DepthRestorer()(scene["depth"], scene["rgb"]), scene["gt"], scene["mask"])
+        b = rmse(fast(scene["depth"], scene["rgb"]), scene["gt"], scene["mask"])
+        assert b < 1.1 * a
+        with pytest.raises(ValueError, match="allowed are"):
+            DepthRestorer.preset("fastest")
+
     def test_depth_only(self, scene):
         out = restore_depth(scene["depth"], None, **SMALL)
         assert torch.isfinite(out).all()
@@ -150,7 +160,7 @@ class TestErrors:
             (lambda s: (torch.zeros_like(s["depth"]), s["rgb"]), "no measured pixel"),
             (lambda s: (s["depth"], s["rgb"] * float("nan")), "NaN or inf"),
             (lambda s: (s["depth"], s["rgb"] * 255), r"\[0,1\]"),
-            (lambda s: (s["depth"][..., :3, :3], s["rgb"][..., :3, :3]), "block size"),
+            (lambda s: (s["depth"][..., :2, :2], s["rgb"][..., :2, :2]), "block size"),
             (lambda s: (-s["depth"] - 1, s["rgb"]), "negative"),
             (lambda s: (s["depth"] + float("inf"), s["rgb"]), "inf"),
             (lambda s: (s["depth"].to(torch.complex64), s["rgb"]), "dtype"),

@@ -85,3 +85,8 @@ def test_fft_dct_equals_matrix_dct(shape):
     # gradcheck on one small FFT-path slice (rows of length >= 64 take the FFT path); full-size Jacobians are slow
     xr = x[:1, :1, :3, :64].detach().clone().requires_grad_()
     torch.autograd.gradcheck(lambda v: idct2(dct2(v) * 0.5), (xr,))
+
+
+def test_fast_preset_row_uses_the_preset_and_reports_stages():
+    row = measure("full-fast", 24, 32, 1, repeats=1)
+    assert row["method"] == "full-fast" and set(row["stages"]) >= {"block_matching", "total"}

@@ -19,7 +19,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import ABLATIONS, RestorerConfig
+from .config import ABLATIONS, PRESETS, RestorerConfig
 from .errors import ShapeError
 from .fill import fill_holes
 from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, singular_test, stage
@@ -82,6 +82,18 @@ class DepthRestorer(nn.Module):
         if name not in ABLATIONS:
             raise ValueError(f"unknown ablation {name!r}; allowed are {sorted(ABLATIONS)}.")
         return cls(**{**ABLATIONS[name], **overrides})
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "DepthRestorer":
+        """A speed preset of :data:`~torch_depth_sr.config.PRESETS` (``'fast'``), then ``overrides``.
+
+        Examples:
+            >>> DepthRestorer.preset("fast").config.search_window
+            11
+        """
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset {name!r}; allowed are {sorted(PRESETS)}.")
+        return cls(**{**PRESETS[name], **overrides})
 
     def forward(self, depth, rgb=None, mask=None, noise_sigma=None, scale_factor: Optional[int] = None,
                 return_details: bool = False):

@@ -31,6 +31,8 @@ def _model(name: str, device: str, overrides: str = "{}"):
         return DepthRestorer.from_pretrained("denoise").to(device)
     if name == "trained-x4":
         return DepthRestorer.from_pretrained("upsample-x4").to(device)
+    if name == "full-fast":
+        return DepthRestorer.preset("fast", **json.loads(overrides)).to(device)
     return DepthRestorer.ablation(name, **json.loads(overrides)).to(device)
 
 
@@ -61,7 +63,7 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             from ..baselines import dictionary_denoise
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
-        if name in ("tv", "tv+nl", "full", "trained", "trained-x4"):
+        if name in ("tv", "tv+nl", "full", "full-fast", "trained", "trained-x4"):
             return _model(name, device, json.dumps(config or {}, sort_keys=True))(y, rgb)
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
-                     "and 'trained'.")
+                     "and 'full-fast', 'trained', 'trained-x4'.")

@@ -40,10 +40,10 @@ from typing import Optional
 
 import torch
 
-METHODS = ("full", "jbf", "dictionary", "kornia-jbf9")
+METHODS = ("full", "full-fast", "jbf", "dictionary", "kornia-jbf9")
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
-DEFAULT_SKIP = ("full@1088x1376x8", "dictionary@1088x1376x8")
+DEFAULT_SKIP = ("full@1088x1376x8", "full-fast@1088x1376x8", "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "cg")
 
 
@@ -78,10 +78,10 @@ def _make_runner(method: str, device: str):
     """A function ``(depth, rgb) -> (out, details or None)`` for ``method``."""
     from .methods import DICTIONARY_PARAMS, JBF_PARAMS
 
-    if method == "full":
+    if method in ("full", "full-fast"):
         from ..model import DepthRestorer
 
-        model = DepthRestorer().to(device)
+        model = (DepthRestorer() if method == "full" else DepthRestorer.preset("fast")).to(device)
 
         def run(y, rgb):
             r = model(y, rgb, return_details=True)
