@@ -183,6 +183,11 @@ def joint_bilateral_filter(
         raise DepthSRError(f"kernel_size must be a positive odd int; got {kernel_size!r}.")
     if color_distance_type not in ("l1", "l2"):
         raise DepthSRError(f"color_distance_type must be 'l1' or 'l2'; got {color_distance_type!r}.")
+    h, w = depth.shape[-2:]
+    if kernel_size // 2 >= min(h, w):
+        largest = max(1, 2 * min(h, w) - 1)
+        raise ShapeError(f"depth is {h}x{w}, too small for kernel_size={kernel_size} (reflect padding needs "
+                         f"kernel_size // 2 < min(H, W)); use kernel_size <= {largest} or a larger image.")
     if fill_passes < 0:
         raise DepthSRError(f"fill_passes must be >= 0; got {fill_passes}.")
     b = depth.shape[0]
