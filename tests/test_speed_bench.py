@@ -90,3 +90,16 @@ def test_fft_dct_equals_matrix_dct(shape):
 def test_fast_preset_row_uses_the_preset_and_reports_stages():
     row = measure("full-fast", 24, 32, 1, repeats=1)
     assert row["method"] == "full-fast" and set(row["stages"]) >= {"block_matching", "total"}
+
+
+def test_tradeoffs_timing_and_accuracy_on_tiny_inputs():
+    from torch_depth_sr.datasets.synthetic import make_scene
+    from torch_depth_sr.evaluation.tradeoffs import accuracy, timing
+
+    assert timing({"search_window": 7, "match_layers": [2]}, height=24, width=32, repeats=1) > 0
+    s = make_scene(32, 32, seed=5)
+    gt = s["gt"][None]
+    sample = {"track": "paper", "depth": gt + torch.randn_like(gt), "rgb": s["rgb"][None], "gt": gt,
+              "mask": torch.ones_like(gt)}
+    res = accuracy({"num_layers": 2, "search_window": 7}, [sample])
+    assert set(res) == {"paper"} and 0 < res["paper"] < 1.0  # below the input noise of 1
