@@ -414,6 +414,17 @@ static void insert_SFX(REAL v, int32_t id, REAL* td, int32_t* ti, int k) {
     td[m] = v; ti[m] = id;
 }
 
+/* Offer the distances dd[j0..j1) of one image row, under offset id `id`, to the running top-k lists
+   td/ti (k entries per pixel; td, ti point at the list of column 0 of the receiving row). */
+static void offer_row_SFX(const REAL* dd, int j0, int j1, int32_t id, REAL* td, int32_t* ti, int k) {
+    for (int j = j0; j < j1; ++j) {
+        const REAL d = dd[j];
+        REAL* tdj = td + (int64_t)j * k;
+        int32_t* tij = ti + (int64_t)j * k;
+        if (d < tdj[k - 1] || (d == tdj[k - 1] && id < tij[k - 1])) insert_SFX(d, id, tdj, tij, k);
+    }
+}
+
 /* Running top-k over the search window for image rows [h0, h1) of one sample.
    xp, tp, cp: planes padded by r (replicate) then R (zeros), row stride Wp; tp/cp may be NULL.
    order: the no offset ids (dy+R)*S + (dx+R) to visit (centre first, so that the running k-th
@@ -506,25 +517,13 @@ int bm_rows_SFX(const REAL* xp, const REAL* tp, const REAL* cp, int nc, int64_t 
                     }
                 }
                 for (int j = j0; j < j1; ++j) dd[j] = dd[j] > 0 ? dd[j] : 0;
-                if (i >= f0 && i < f1) {
-                    REAL* td = topd + (int64_t)(i - h0) * W * k;
-                    int32_t* ti = topi + (int64_t)(i - h0) * W * k;
-                    for (int j = j0; j < j1; ++j) {
-                        const REAL d = dd[j];
-                        REAL* tdj = td + (int64_t)j * k;
-                        int32_t* tij = ti + (int64_t)j * k;
-                        if (d < tdj[k - 1] || (d == tdj[k - 1] && oid < tij[k - 1])) insert_SFX(d, oid, tdj, tij, k);
-                    }
+                if (i >= f0 && i < f1) {  /* pixel (i, j) gets candidate (i+dy, j+dx) */
+                    const int64_t at = (int64_t)(i - h0) * W * k;
+                    offer_row_SFX(dd, j0, j1, oid, topd + at, topi + at, k);
                 }
-                if (i >= m0 && i < m1) {
-                    REAL* tdm = topd + ((int64_t)(i + dy - h0) * W + dx) * k;
-                    int32_t* tim = topi + ((int64_t)(i + dy - h0) * W + dx) * k;
-                    for (int j = j0; j < j1; ++j) {
-                        const REAL d = dd[j];
-                        REAL* tdj = tdm + (int64_t)j * k;
-                        int32_t* tij = tim + (int64_t)j * k;
-                        if (d < tdj[k - 1] || (d == tdj[k - 1] && mid < tij[k - 1])) insert_SFX(d, mid, tdj, tij, k);
-                    }
+                if (i >= m0 && i < m1) {  /* pixel (i+dy, j+dx) gets candidate (i, j) */
+                    const int64_t at = ((int64_t)(i + dy - h0) * W + dx) * k;
+                    offer_row_SFX(dd, j0, j1, mid, topd + at, topi + at, k);
                 }
             }
         }
