@@ -103,3 +103,23 @@ def test_tradeoffs_timing_and_accuracy_on_tiny_inputs():
               "mask": torch.ones_like(gt)}
     res = accuracy({"num_layers": 2, "search_window": 7}, [sample])
     assert set(res) == {"paper"} and 0 < res["paper"] < 1.0  # below the input noise of 1
+
+
+def test_errors_by_groups_and_matches_a_direct_computation():
+    from torch_depth_sr import DepthRestorer
+    from torch_depth_sr.datasets.synthetic import make_scene
+    from torch_depth_sr.evaluation.tune import errors_by
+
+    s = make_scene(32, 32, seed=6)
+    gt = s["gt"][None]
+    mask = torch.ones_like(gt)
+    mask[..., :4, :] = 0
+    lr = torch.nn.functional.avg_pool2d(gt, 2)
+    samples = [{"factor": 2, "depth": lr, "rgb": s["rgb"][None], "gt": gt, "mask": mask},
+               {"factor": None, "depth": gt + 0.5, "rgb": s["rgb"][None], "gt": gt, "mask": mask}]
+    model = DepthRestorer(num_layers=2, search_window=7)
+    got = errors_by(model, samples, "factor", metric="mae")
+    with torch.no_grad():
+        p = model(lr, s["rgb"][None], scale_factor=2)
+    assert set(got) == {2, None}
+    assert got[2] == [pytest.approx(float(((p - gt).abs() * mask).sum() / mask.sum()))]

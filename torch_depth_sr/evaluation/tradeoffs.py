@@ -19,7 +19,9 @@ import time
 import numpy as np
 import torch
 
+from ..config import RestorerConfig
 from ..model import DepthRestorer
+from .tune import errors_by, fitting_samples
 
 DEFAULT_CONFIGS = (
     {},
@@ -33,41 +35,12 @@ DEFAULT_CONFIGS = (
 
 
 def _model(overrides: dict) -> DepthRestorer:
-    d = dict(overrides)
-    if "match_layers" in d:
-        d["match_layers"] = tuple(d["match_layers"])
-    return DepthRestorer(**d)
-
-
-def fitting_samples(tracks=("paper", "sensor")):
-    """Degraded full-size 2006 scenes, one dict per (track, scene)."""
-    from .._data_root import data_root
-    from ..datasets.discover import find_scenes
-    from .protocols import make_degradation
-
-    loaded = [r.load() for r in find_scenes(data_root(), "paper") if r.year == 2006]
-    if not loaded:
-        raise FileNotFoundError("no Middlebury 2006 scenes under the data root (set TORCH_DEPTH_SR_DATA).")
-    out = []
-    for track in tracks:
-        deg = make_degradation(track)
-        for s in loaded:
-            d = deg(s)
-            out.append({"track": track, "name": s["name"], "depth": d["depth"][None], "rgb": d["rgb"][None],
-                        "gt": d["gt"][None], "mask": d["mask"][None]})
-    return out
+    return DepthRestorer(RestorerConfig.from_dict(overrides))
 
 
 def accuracy(overrides: dict, samples) -> dict:
     """Mean RMSE over GT-known pixels, per track."""
-    model = _model(overrides)
-    per_track: dict = {}
-    with torch.no_grad():
-        for s in samples:
-            p = model(s["depth"], s["rgb"])
-            e = float((((p - s["gt"]) ** 2 * s["mask"]).sum() / s["mask"].sum()) ** 0.5)
-            per_track.setdefault(s["track"], []).append(e)
-    return {t: float(np.mean(v)) for t, v in per_track.items()}
+    return {t: float(np.mean(v)) for t, v in errors_by(_model(overrides), samples, "track").items()}
 
 
 def timing(overrides: dict, height: int = 480, width: int = 640, repeats: int = 3) -> float:
@@ -93,7 +66,7 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args(argv)
     configs = [json.loads(c) for c in args.configs] if args.configs else [dict(c) for c in DEFAULT_CONFIGS]
-    samples = fitting_samples() if args.part != "timing" else None
+    samples = fitting_samples(None, n_synthetic=0) if args.part != "timing" else None
     print(f"threads={torch.get_num_threads()}; RMSE: 2006 scenes, full images; seconds: 640x480 synthetic")
     for c in configs:
         cells = []

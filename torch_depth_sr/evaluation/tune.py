@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from typing import Optional
 
 import torch
 
@@ -20,7 +21,9 @@ from ..model import DepthRestorer
 SEARCH = ("singular_sigma_floor", "guided_prior", "lam", "eta", "mu2", "mu1", "gamma", "color_weight", "temperature")
 
 
-def fitting_samples(crop: int, n_synthetic: int = 4):
+def fitting_samples(crop: Optional[int], n_synthetic: int = 4, tracks=("paper", "sensor")):
+    """Degraded 2006 scenes (+ ``n_synthetic`` synthetic ones), one dict per (track, scene); centre
+    ``crop``×``crop`` crops, or the full images when ``crop`` is None."""
     from .._data_root import data_root
     from ..datasets.discover import find_scenes
     from ..datasets.synthetic import make_scene
@@ -29,29 +32,41 @@ def fitting_samples(crop: int, n_synthetic: int = 4):
     out = []
     scenes = [r for r in find_scenes(data_root(), "paper") if r.year == 2006]
     loaded = [r.load() for r in scenes]
+    if not loaded and not n_synthetic:
+        raise FileNotFoundError("no Middlebury 2006 scenes under the data root (set TORCH_DEPTH_SR_DATA).")
     for i in range(n_synthetic):
-        s = make_scene(crop, crop, seed=1000 + i)
+        s = make_scene(crop or 160, crop or 160, seed=1000 + i)
         loaded.append({**s, "name": f"synthetic{i}"})
-    for track in ("paper", "sensor"):
+    for track in tracks:
         deg = make_degradation(track)
         for s in loaded:
             d = deg(s)
-            h, w = d["gt"].shape[-2:]
-            t, l = max(0, (h - crop) // 2), max(0, (w - crop) // 2)
-            sl = (Ellipsis, slice(t, t + crop), slice(l, l + crop))
+            sl = (Ellipsis,)
+            if crop is not None:
+                h, w = d["gt"].shape[-2:]
+                t, l = max(0, (h - crop) // 2), max(0, (w - crop) // 2)
+                sl = (Ellipsis, slice(t, t + crop), slice(l, l + crop))
             out.append({"track": track, "name": s["name"], "depth": d["depth"][sl][None], "rgb": d["rgb"][sl][None],
                         "gt": d["gt"][sl][None], "mask": d["mask"][sl][None]})
     return out
 
 
-def score(config: RestorerConfig, samples) -> float:
-    model = DepthRestorer(config)
-    errs = []
+def errors_by(model: DepthRestorer, samples, key: str, metric: str = "rmse") -> dict:
+    """``{sample[key]: [error per sample]}``: RMSE or MAE over ``mask`` of ``model`` on each sample
+    (guided upsampling where a sample has a ``factor``)."""
+    out: dict = {}
     with torch.no_grad():
         for s in samples:
-            p = model(s["depth"], s["rgb"])
-            m = s["mask"]
-            errs.append(float(((p - s["gt"]) ** 2 * m).sum() / m.sum()) ** 0.5)
+            p = model(s["depth"], s["rgb"], scale_factor=s.get("factor"))
+            diff = (p - s["gt"]).abs() if metric == "mae" else (p - s["gt"]) ** 2
+            e = float((diff * s["mask"]).sum() / s["mask"].sum())
+            out.setdefault(s[key], []).append(e if metric == "mae" else e ** 0.5)
+    return out
+
+
+def score(config: RestorerConfig, samples) -> float:
+    """Mean RMSE over all samples."""
+    errs = [e for v in errors_by(DepthRestorer(config), samples, "track").values() for e in v]
     return sum(errs) / len(errs)
 
 

@@ -22,6 +22,7 @@ import torch.nn.functional as F
 
 from ..config import RestorerConfig
 from ..model import DepthRestorer
+from .tune import errors_by
 
 DEFAULT_TRIALS = (
     {"upsample_scale": {}},
@@ -62,13 +63,7 @@ def upsampling_fitting_samples(factors=(2, 4), sigma: float = 5.0):
 
 def score(config: RestorerConfig, samples) -> dict:
     """Mean MAE per factor."""
-    model = DepthRestorer(config)
-    per_factor: dict = {}
-    with torch.no_grad():
-        for s in samples:
-            p = model(s["depth"], s["rgb"], scale_factor=s["factor"])
-            mae = float(((p - s["gt"]).abs() * s["mask"]).sum() / s["mask"].sum())
-            per_factor.setdefault(s["factor"], []).append(mae)
+    per_factor = errors_by(DepthRestorer(config), samples, "factor", metric="mae")
     return {f: float(np.mean(v)) for f, v in sorted(per_factor.items())}
 
 
