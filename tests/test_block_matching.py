@@ -237,3 +237,23 @@ def test_numpy_and_c_fallback_env(monkeypatch):
     r = block_match_reference(x, c, t, block_size=3, search_window=7, k=5)
     assert_same_matches(a, r, 1e-5)
     assert np.isfinite(a.dist.numpy()).all()
+
+
+@pytest.mark.parametrize("how", ["topk", "split", "sort"])
+@pytest.mark.parametrize("n,k", [(441, 10), (121, 6), (17, 3)])
+def test_every_selection_of_the_torch_path_keeps_the_k_smallest(how, n, k):
+    """The torch path's top-k choices (picked for GPU speed) select the same keys as a full sort."""
+    from torch_depth_sr.block_matching import _smallest_keys
+
+    g = torch.Generator().manual_seed(n)
+    keys = torch.randint(0, 2 ** 62, (2, 50, n), generator=g)
+    keys[0, 0, :5] = torch.iinfo(torch.int64).max  # invalid candidates never win
+    expected = torch.sort(keys, dim=2).values[..., :k]
+    assert torch.equal(_smallest_keys(keys, k, how), expected)
+
+
+def test_unknown_selection_is_refused():
+    from torch_depth_sr.block_matching import _smallest_keys
+
+    with pytest.raises(DepthSRError, match="selection must be one of"):
+        _smallest_keys(torch.zeros(1, 2, 500, dtype=torch.int64), 3, "heap")

@@ -19,13 +19,15 @@ Two implementations give the same result:
 
 * :func:`block_match_reference` — ``F.unfold`` of every candidate block; readable, obviously correct,
   memory ``O(b²·S²·H·W)``: for small images and tests.
-* :func:`block_match` — the default. Shift-and-box-filter: for each row ``dy`` of the search window
-  the squared-difference images of all ``dx`` offsets are formed at once (a sliding-window view),
-  box-summed over the block (OpenCV on CPU, ``avg_pool2d`` elsewhere) and merged into a running
-  top-``k``. The offset id is packed into the low bits of the distance's float64 bit pattern (a
-  float32 distance has 29 unused low bits there), so one integer sort selects distance and index
-  together, without an argsort. Rows are processed in chunks, so memory stays bounded (a few
-  tens of MB per worker thread at any image size); on CPU the chunks run on a thread pool.
+* :func:`block_match` — the default. Shift-and-box-filter: the squared-difference images of the
+  offsets are box-summed over the block and the ``k`` smallest kept. On CPU a small C kernel walks
+  the offsets with a running top-``k`` (numpy/OpenCV fallback: one window row ``dy`` at a time); on
+  other devices (torch) every offset of a band of rows is formed at once (``as_strided`` views,
+  ``avg_pool2d``) and one selection per pixel keeps the ``k`` smallest — few, large launches suit a
+  GPU. The offset id is packed into the low bits of the distance's float64 bit pattern (a float32
+  distance has 29 unused low bits there), so one integer selection picks distance and index
+  together, without an argsort. Rows are processed in chunks, so memory stays bounded (tens of MB
+  per CPU thread; about 2 GB on a GPU at any image size).
 
 Reference: Y. Yang et al., "depth maps restoration based on the sparse representation of nonlocal
 self-similarity" (the paper under ``shared/paper``), §II-B.
@@ -721,6 +723,27 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
 # ----------------------------------------------------------------------------------------------
 
 
+# How the k smallest of the (B, pixels, candidates) keys are selected on the torch path. Every
+# choice returns the same keys (they are unique) and differs in speed only: PyTorch's torch.topk
+# takes a multi-block radix path for >= 400 candidates over > 4000 slices.
+_SELECT = "split"
+_SELECT_CHOICES = ("topk", "split", "sort")
+
+
+def _smallest_keys(keys: torch.Tensor, k: int, how: Optional[str] = None) -> torch.Tensor:
+    """``(B, P, N)`` int64 keys -> ``(B, P, k)``: the ``k`` smallest of every row, ascending."""
+    how = how or _SELECT
+    n = keys.shape[2]
+    if how == "topk" or (how == "split" and (n < 400 or n <= 2 * k)):
+        return torch.topk(keys, k, dim=2, largest=False, sorted=True).values
+    if how == "sort":
+        return torch.sort(keys, dim=2).values[..., :k]
+    if how == "split":  # halves under 400 candidates each, then the 2k survivors
+        parts = [torch.topk(p, k, dim=2, largest=False, sorted=False).values for p in keys.split((n + 1) // 2, dim=2)]
+        return torch.topk(torch.cat(parts, dim=2), k, dim=2, largest=False, sorted=True).values
+    raise DepthSRError(f"selection must be one of {_SELECT_CHOICES}; got {how!r}.")
+
+
 def _block_match_torch(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride):
     bsz, _, h, w = depth.shape
     r, big_r, s = block_size // 2, search_window // 2, search_window
@@ -728,81 +751,79 @@ def _block_match_torch(depth, rgb, trust, block_size, search_window, k, rho, inc
     dev = depth.device
     cdt = torch.float64 if depth.dtype == torch.float64 else torch.float32
     low_mask = (1 << max(1, (s * s - 1).bit_length())) - 1
-    offs_x = torch.tensor(_lattice(big_r, stride), device=dev)
-    g = offs_x.numel()
+    lat = _lattice(big_r, stride)
+    g = len(lat)
+    n_off = g * g  # candidates per pixel, (dy, dx) row-major
+    offs = torch.tensor(lat, device=dev)
+    oid_last = (offs[:, None] + big_r) * s + offs[None, :] + big_r  # (G, G) over (dy, dx)
+    centre = lat.index(0)
 
     def pad(img):  # (B,C,H,W) -> replicate by r, zeros by R
-        return F.pad(F.pad(img.detach().to(cdt), (r,) * 4, mode="replicate"), (big_r,) * 4)
+        return F.pad(F.pad(img.detach().to(cdt), (r,) * 4, mode="replicate"), (big_r,) * 4).contiguous()
 
     xp = pad(depth)[:, 0]  # (B, Hp, Wp)
     tp = None if trust is None else pad(trust)[:, 0]
     cp = None if rgb is None else pad(rgb)  # (B, C, Hp, Wp)
     ncol = 0 if rgb is None else rgb.shape[1]
-    rho = rho.to(device=dev, dtype=cdt).view(-1, 1, 1, 1)
-    if chunk_rows is None:
-        chunk_rows = max(4, min(h, int(2 ** 22 // max(1, bsz * w * g))))
-    col_valid = (torch.arange(w, device=dev)[:, None] + offs_x[None, :])
-    col_valid = (col_valid >= 0) & (col_valid < w)  # (W, G)
-    top_all = torch.empty(bsz, h * w, k, dtype=torch.int64, device=dev)
+    rho = rho.to(device=dev, dtype=cdt).view(-1, 1, 1, 1, 1)
+    if chunk_rows is None:  # elements of the (B, G, G, rows, W) stacks: 2²² on CPU, 2²⁶ on a GPU
+        budget = 2 ** 26 if dev.type == "cuda" else 2 ** 22
+        chunk_rows = max(1, min(h, budget // max(1, bsz * n_off * (w + 2 * r))))
+    col_ok = (torch.arange(w, device=dev)[:, None] + offs[None, :] >= 0) & \
+             (torch.arange(w, device=dev)[:, None] + offs[None, :] < w)  # (W, G) over dx
+    top_all = torch.empty(bsz, k, h, w, dtype=torch.int64, device=dev)
 
-    def box(a):  # (B, rows+2r, W+2r, G) -> (B, rows, W, G) unnormalised b×b sums
-        bb, hh, ww, gg = a.shape
-        y = F.avg_pool2d(a.permute(0, 3, 1, 2).reshape(bb * gg, 1, hh, ww), block_size, stride=1)
-        return y.view(bb, gg, hh - 2 * r, ww - 2 * r).permute(0, 2, 3, 1) * nb
+    def candidates(p, h0, rows):  # (..., Hp, Wp) -> (..., G, G, rows+2r, W+2r): the block of every (dy, dx)
+        st = p.stride()
+        start = p[..., big_r + h0 + lat[0]:, big_r + lat[0]:]
+        return start.as_strided((*p.shape[:-2], g, g, rows + 2 * r, w + 2 * r),
+                                (*st[:-2], st[-2] * stride, st[-1] * stride, st[-2], st[-1]), start.storage_offset())
 
-    def windows(p, band):  # (..., Hp, Wp) -> (..., rows+2r, W+2r, G)
-        return p[..., band, :].unfold(-1, s, 1)[..., ::stride]
+    def box(a):  # (B, G, G, rows+2r, W+2r) -> (B, G, G, rows, W) unnormalised b×b sums
+        bb, _, _, hh, ww = a.shape
+        y = F.avg_pool2d(a.reshape(bb * n_off, 1, hh, ww), block_size, stride=1)
+        return y.view(bb, g, g, hh - 2 * r, ww - 2 * r) * nb
 
-    for h0 in range(0, h, chunk_rows):
+    for h0 in range(0, h, chunk_rows):  # each chunk: every offset at once, then one top-k
         h1 = min(h, h0 + chunk_rows)
         rows = h1 - h0
-        ya, yb = big_r + h0, big_r + h1 + 2 * r
-        cols = slice(big_r, big_r + w + 2 * r)
-        xa = xp[:, ya:yb, cols].unsqueeze(-1)
-        ta = None if tp is None else tp[:, ya:yb, cols].unsqueeze(-1)
-        ca = None if cp is None else cp[:, :, ya:yb, cols].unsqueeze(-1)
-        top = torch.full((bsz, rows * w, k), _INT64_MAX, dtype=torch.int64, device=dev)
-        for dy in _lattice(big_r, stride):
-            lo, hi = max(0, -dy - h0), min(rows, h - dy - h0)
-            if hi <= lo:
-                continue
-            band = slice(ya + dy, yb + dy)
-            e = (xa - windows(xp, band)) ** 2  # (B, rows+2r, W+2r, G)
-            if tp is not None:
-                tt = ta * windows(tp, band)
-                e = e * tt
-            if cp is None:
-                csum = None
-            else:
-                csum = ((ca - windows(cp, band)) ** 2).sum(1)  # (B, rows+2r, W+2r, G)
-            if tp is None:
-                if csum is not None:
-                    e = e + csum * (rho / ncol)
-                d = box(e) / nb
-            else:
-                d = box(e) / box(tt).clamp_min(1.0)
-                if csum is not None:
-                    d = d + box(csum) * (rho / (ncol * nb))
-            d = d[:, lo:hi].clamp_min(0.0) + 0.0  # (B, n_rows, W, G)
-            oid = (dy + big_r) * s + offs_x + big_r  # (G,)
-            if cdt == torch.float32:
-                keys = d.to(torch.float64).view(torch.int64) | oid
-            else:
-                keys = (d.contiguous().view(torch.int64) & ~low_mask) | oid
-            keys = keys.masked_fill(~col_valid, _INT64_MAX)
-            if dy == 0:
-                centre = offs_x == 0
-                if include_self:
-                    keys[..., centre] = oid[centre]
-                else:
-                    keys[..., centre] = _INT64_MAX
-            part = top[:, lo * w:hi * w]
-            buf = torch.cat([part, keys.reshape(bsz, -1, g)], dim=2)
-            top[:, lo * w:hi * w] = torch.sort(buf, dim=2).values[..., :k]
-        top_all[:, h0 * w:h1 * w] = top
-    oid = (top_all & low_mask).permute(0, 2, 1).reshape(bsz, k, h, w)
-    dist = (top_all & ~low_mask).view(torch.float64).permute(0, 2, 1).reshape(bsz, k, h, w).to(depth.dtype)
-    return dist.contiguous(), _index_from_offsets(oid, search_window, h, w)
+        here = (slice(big_r + h0, big_r + h1 + 2 * r), slice(big_r, big_r + w + 2 * r))
+        e = (xp[:, None, None, here[0], here[1]] - candidates(xp, h0, rows)).square_()  # (B, G, G, rows+2r, W+2r)
+        if tp is not None:
+            tt = tp[:, None, None, here[0], here[1]] * candidates(tp, h0, rows)
+            e.mul_(tt)
+        csum = None
+        if cp is not None:
+            cand_c = candidates(cp, h0, rows)  # (B, C, G, G, rows+2r, W+2r)
+            for c in range(ncol):
+                sq = (cp[:, c, None, None, here[0], here[1]] - cand_c[:, c]).square_()
+                csum = sq if csum is None else csum.add_(sq)
+        if tp is None:
+            if csum is not None:
+                e.add_(csum.mul_(rho / ncol))
+            d = box(e).div_(nb)
+        else:
+            d = box(e).div_(box(tt).clamp_min_(1.0))
+            if csum is not None:
+                d.add_(box(csum).mul_(rho / (ncol * nb)))
+        del e, csum
+        d = d.clamp_min_(0.0).add_(0.0)  # (B, G, G, rows, W); + 0.0 turns -0.0 into +0.0
+        # float64 bit patterns, candidates last (one transposing copy), offset id in the low bits
+        keys = torch.empty(bsz, rows, w, g, g, dtype=torch.float64, device=dev).copy_(d.permute(0, 3, 4, 1, 2))
+        del d
+        keys = keys.view(torch.int64)
+        if cdt == torch.float64:
+            keys &= ~low_mask
+        keys |= oid_last
+        row_ok = (torch.arange(h0, h1, device=dev)[:, None] + offs[None, :] >= 0) & \
+                 (torch.arange(h0, h1, device=dev)[:, None] + offs[None, :] < h)  # (rows, G) over dy
+        keys.masked_fill_(~(row_ok[:, None, :, None] & col_ok[None, :, None, :]), _INT64_MAX)
+        keys[..., centre, centre] = oid_last[centre, centre] if include_self else _INT64_MAX
+        top = _smallest_keys(keys.view(bsz, rows * w, n_off), k)  # (B, rows·W, k)
+        top_all[:, :, h0:h1] = top.transpose(1, 2).reshape(bsz, k, rows, w)
+    oid_top = top_all & low_mask
+    dist = (top_all & ~low_mask).view(torch.float64).to(depth.dtype)
+    return dist.contiguous(), _index_from_offsets(oid_top, search_window, h, w)
 
 
 def block_match(

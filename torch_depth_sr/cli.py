@@ -24,7 +24,15 @@ def _metadata(device: str = "cpu") -> dict:
 
     return {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "commit": commit,
             "torch": torch.__version__, "kornia": kornia.__version__, "python": platform.python_version(),
-            "device": device, "threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine()}
+            "device": device, "threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine(),
+            **_gpu_metadata(device)}
+
+
+def _gpu_metadata(device: str) -> dict:
+    if not str(device).startswith("cuda") or not torch.cuda.is_available():
+        return {}
+    props = torch.cuda.get_device_properties(torch.device(device))
+    return {"gpu": props.name, "gpu_memory_gb": round(props.total_memory / 2**30, 1), "cuda": torch.version.cuda}
 
 
 def _print_table(rows: list[dict], cols: list[str], title: str = "") -> None:
