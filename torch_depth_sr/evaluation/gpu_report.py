@@ -131,6 +131,8 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", default="370x463,480x640,1088x1376")
     p.add_argument("--batches", default="1,8")
     p.add_argument("--repeats", type=int, default=10)
+    p.add_argument("--skip", default="dictionary@1088x1376x8",
+                   help="comma-separated method@HxWxB rows of the speed table not to run")
     a = p.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -163,7 +165,7 @@ def main(argv=None) -> int:
     (out / "gpu_report.json").write_text(json.dumps(report, indent=1))
 
     ns = argparse.Namespace(device=a.device, sizes=sizes, batches=batches, repeats=a.repeats, isolate=False,
-                            skip=("dictionary@1088x1376x8",), max_seconds=30.0, methods=list(speed.METHODS),
+                            skip=tuple(t for t in a.skip.split(",") if t), max_seconds=30.0, methods=list(speed.METHODS),
                             json=str(out / "speed.json"))
     return speed.run_speed(ns)
 
