@@ -424,3 +424,20 @@ class TestDictionaryDenoise:
             dictionary_denoise(noisy, method="svd")
         with pytest.raises(DepthSRError, match="stride"):
             dictionary_denoise(noisy, stride=0)
+
+
+@pytest.mark.parametrize("budget", [1, 700, 9000])
+@pytest.mark.parametrize("shape,kernel", [((2, 37, 29), 11), ((1, 12, 40), 9), ((3, 6, 9), 11)])
+def test_jbf_in_row_bands_equals_the_whole_image(monkeypatch, budget, shape, kernel):
+    """The banded masked JBF (used on GPUs to bound kornia's memory) is bitwise the whole-image one."""
+    import torch_depth_sr.baselines.jbf as jbf_module
+
+    b, h, w = shape
+    g = torch.Generator().manual_seed(h * w)
+    depth = torch.rand(b, 1, h, w, generator=g) * 10
+    depth[torch.rand(b, 1, h, w, generator=g) < 0.3] = 0
+    rgb = torch.rand(b, 3, h, w, generator=g)
+    whole = jbf_module.joint_bilateral_filter(depth, rgb, kernel_size=kernel, sigma_space=3.0, sigma_color=0.1)
+    monkeypatch.setattr(jbf_module, "_band_budget", lambda device: budget)
+    banded = jbf_module.joint_bilateral_filter(depth, rgb, kernel_size=kernel, sigma_space=3.0, sigma_color=0.1)
+    assert torch.equal(banded, whole)
