@@ -112,3 +112,29 @@ def test_compiled_kernel_matches_torch_path(monkeypatch, dtype, threads):
     assert 0 < float((qt == 0).sum() - (obs == 0).sum())  # the test does reject some observed pixels
     assert (qc != qt).float().mean() <= (0 if dtype == torch.float64 else 1e-3)
     torch.testing.assert_close(pc, pt, atol=1e-5, rtol=1e-4)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_subnormal_weight_sum_gives_no_nan(monkeypatch, dtype):
+    """A pixel whose only trusted neighbour has a subnormal weight: 1/s overflows unless clamped.
+
+    (Found through a NaN in the confidence map written by ``torch-depth-sr restore --confidence``.)
+    """
+    from torch_depth_sr.block_matching import BlockMatches
+
+    h, w, k = 1, 3, 2
+    x = torch.tensor([[[[5.0, 1.0, 2.0]]]], dtype=dtype)
+    y = x.clone()
+    obs = torch.tensor([[[[1.0, 0.0, 1.0]]]], dtype=dtype)  # pixel 1 unobserved: q = 0 there
+    tiny = torch.finfo(dtype).tiny / 2 ** 10  # subnormal
+    index = torch.stack([torch.tensor([[1, 0, 0]]), torch.tensor([[2, 2, 1]])]).view(1, k, h, w)
+    weight = torch.stack([torch.tensor([[1.0, 0.5, 0.5]]), torch.tensor([[tiny, 0.5, 0.5]])]).view(1, k, h, w)
+    m = BlockMatches(torch.zeros(1, k, h, w, dtype=dtype), index, weight.to(dtype))
+    out = {}
+    for path in ("c", "torch"):
+        if path == "torch":
+            monkeypatch.setenv("TORCH_DEPTH_SR_NO_CEXT", "1")
+        out[path] = detect_singular(y, x, obs, m, sigma_floor=0.5, rounds=1, return_confidence=True)
+    for path, (q, p) in out.items():
+        assert torch.isfinite(p).all(), path
+    torch.testing.assert_close(out["c"][1], out["torch"][1])

@@ -555,8 +555,8 @@ int64_t singular_round_SFX(const REAL* y0, const uint8_t* obs, const REAL* x, co
             wm[m] = w0[(int64_t)m * HW + i]; xm[m] = x[j];
             s += wm[m] * qo[j];
         }
-        if (s > 0) {
-            const REAL inv = 1 / s;
+        if (s > 0) {  /* like the torch path's clamp_min(tiny): a subnormal s would give 1/s = inf, 0*inf = NaN */
+            const REAL inv = 1 / (s > REAL_MIN ? s : REAL_MIN);
             for (int m = 0; m < k; ++m) wm[m] *= qo[idx[(int64_t)m * HW + i]] * inv;
         }
         REAL mu = 0;
@@ -575,7 +575,8 @@ int64_t singular_round_SFX(const REAL* y0, const uint8_t* obs, const REAL* x, co
 }
 """
 
-_C_HEADER = "#include <stdint.h>\n#include <stdlib.h>\n#include <math.h>\n#define KMAX 256\n"
+_C_HEADER = ("#include <stdint.h>\n#include <stdlib.h>\n#include <math.h>\n#include <float.h>\n#define KMAX 256\n"
+             "#define float_MIN FLT_MIN\n#define double_MIN DBL_MIN\n")
 _CLIB = None
 _CLIB_TRIED = False
 
