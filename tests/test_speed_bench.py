@@ -123,3 +123,16 @@ def test_errors_by_groups_and_matches_a_direct_computation():
         p = model(lr, s["rgb"][None], scale_factor=2)
     assert set(got) == {2, None}
     assert got[2] == [pytest.approx(float(((p - gt).abs() * mask).sum() / mask.sum()))]
+
+
+def test_gpu_report_parts_run_on_any_device():
+    """The GPU report's parts (run on a lent GPU, never in CI) still work; here on the CPU, tiny."""
+    from torch_depth_sr.evaluation import gpu_report
+
+    agree = gpu_report.agreement("cpu", 24, 28, 2)
+    assert agree["matches_equal"] == 1.0 and agree["out_max_abs_diff"] == 0.0  # same device: same path
+    assert agree["out_rmse_cpu"] < agree["input_rmse"]
+    sel = gpu_report.selection_times("cpu", [(6, 8)], [1], repeats=1)
+    assert all(sel[0][how + "_exact"] for how in ("topk", "split", "sort"))
+    rows = gpu_report.matching_times("cpu", [(24, 28)], [1, 2], repeats=1)
+    assert [r["batch"] for r in rows] == [1, 2] and all(r["seconds"] > 0 for r in rows)
