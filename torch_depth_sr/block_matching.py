@@ -724,16 +724,15 @@ def _block_match_c(lib, depth, rgb, trust, block_size, search_window, k, rho, in
 # ----------------------------------------------------------------------------------------------
 
 
-# How the k smallest of the (B, pixels, candidates) keys are selected on the torch path. Every
-# choice returns the same keys (they are unique) and differs in speed only: PyTorch's torch.topk
-# takes a multi-block radix path for >= 400 candidates over > 4000 slices.
-_SELECT = "split"
+# Ways of selecting the k smallest of the torch path's (B, pixels, candidates) keys. All return the
+# same keys (they are unique) and differ in speed only; "split" is used: PyTorch's torch.topk takes a
+# slow multi-block radix path for >= 400 candidates over > 4000 slices (H200, 640×480: topk 13.0 ms,
+# split 6.5 ms, sort 14.9 ms; docs/measurements/h200-2026-11-28/gpu_report.json).
 _SELECT_CHOICES = ("topk", "split", "sort")
 
 
-def _smallest_keys(keys: torch.Tensor, k: int, how: Optional[str] = None) -> torch.Tensor:
+def _smallest_keys(keys: torch.Tensor, k: int, how: str = "split") -> torch.Tensor:
     """``(B, P, N)`` int64 keys -> ``(B, P, k)``: the ``k`` smallest of every row, ascending."""
-    how = how or _SELECT
     n = keys.shape[2]
     if how == "topk" or (how == "split" and (n < 400 or n <= 2 * k)):
         return torch.topk(keys, k, dim=2, largest=False, sorted=True).values
@@ -828,8 +827,8 @@ def _block_match_torch(depth, rgb, trust, block_size, search_window, k, rho, inc
         direct = d[:, :, :, big_r:big_r + rows, big_r:big_r + w]  # offset (half[a], lat[c]) at (i, j)
         # offset (−half[a], −lat[c]) at (i, j) is the (half[a], lat[c]) map at (i − half[a], j − lat[c])
         mirrored = d.as_strided((bsz, n_h - 1, g, rows, w), (sb, sa - stride * su, sc - stride * sv, su, sv),
-                                d.storage_offset() + sa + (big_r - half[1] if n_h > 1 else 0) * su
-                                + (big_r - lat[0]) * sv) if n_h > 1 else None
+                                d.storage_offset() + sa + (big_r - half[1]) * su + (big_r - lat[0]) * sv
+                                ) if n_h > 1 else None
         # float64 bit patterns, candidates last (transposing copies), offset id in the low bits
         keys = torch.empty(bsz, rows, w, 2 * n_h - 1, g, dtype=torch.float64, device=dev)
         keys[..., :n_h, :].copy_(direct.permute(0, 3, 4, 1, 2))

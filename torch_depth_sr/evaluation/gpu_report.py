@@ -1,12 +1,12 @@
 """``python -m torch_depth_sr.evaluation.gpu_report``: check and time the model on a CUDA GPU in one run.
 
-Three parts, printed as tables and written as JSON under ``--out``:
+Four parts, printed as tables and written as JSON under ``--out``:
 
 1. **agreement** — the GPU path (torch block matching, torch singular test) against the CPU path
    (C kernels) on the same synthetic frames: share of identical matches, largest distance
    difference, largest output difference, and the RMSE of each against the ground truth;
 2. **selection** — the ways of taking the k smallest block-matching keys (all exact), timed alone
-   and inside one matching pass; the fastest is used for the rest of the run;
+   at 640×480 (the model uses ``"split"``; the record of the choice is in ``docs/measurements``);
 3. **speed** — the speed track (:mod:`torch_depth_sr.evaluation.speed`) on the GPU, in this process
    (``torch.cuda.max_memory_allocated`` is reset per row), every size and batch 1 and 8;
 4. **profile** — one 640×480 forward under ``torch.profiler``: the kernels that take the time and
@@ -145,18 +145,7 @@ def main(argv=None) -> int:
 
     vga = [(480, 640)]  # the selection study at 640×480 whatever --sizes says (larger key stacks pass 2³¹ elements)
     report["selection"] = sel = selection_times(a.device, vga, batches, a.repeats)
-    _print_table(sel, list(sel[0]), "top-k selection of the block-matching keys (seconds)")
-    total = {how: sum(r[how] for r in sel) for how in block_matching._SELECT_CHOICES
-             if all(r[how + "_exact"] for r in sel)}
-    report["matching_by_selection"] = {}
-    for how in total:
-        block_matching._SELECT = how
-        report["matching_by_selection"][how] = matching_times(a.device, vga, batches, a.repeats)
-        print(how, [round(r["ms_per_frame"], 2) for r in report["matching_by_selection"][how]], flush=True)
-    best = min(total, key=lambda how: sum(r["seconds"] for r in report["matching_by_selection"][how]))
-    block_matching._SELECT = best
-    report["selection_used"] = best
-    print(f"selection used from here on: {best!r}", flush=True)
+    _print_table(sel, list(sel[0]), "top-k selection of the block-matching keys (seconds; the model uses 'split')")
     report["block_matching"] = matching_times(a.device, sizes, batches, a.repeats)
     _print_table(report["block_matching"], ["size", "batch", "seconds", "ms_per_frame"], "one block-matching pass")
 
@@ -165,8 +154,8 @@ def main(argv=None) -> int:
     (out / "gpu_report.json").write_text(json.dumps(report, indent=1))
 
     ns = argparse.Namespace(device=a.device, sizes=sizes, batches=batches, repeats=a.repeats, isolate=False,
-                            skip=tuple(t for t in a.skip.split(",") if t), max_seconds=30.0, methods=list(speed.METHODS),
-                            json=str(out / "speed.json"))
+                            skip=tuple(t for t in a.skip.split(",") if t), max_seconds=30.0,
+                            methods=list(speed.METHODS), json=str(out / "speed.json"))
     return speed.run_speed(ns)
 
 
