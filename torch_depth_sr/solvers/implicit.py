@@ -92,7 +92,8 @@ def cg_solve(
 
     With ``implicit=False`` CG runs with autograd tracking: exact gradients of the truncated
     iteration (unrolled backpropagation), memory growing with the number of iterations; ``params``
-    is then ignored (autograd sees them through the closure).
+    is then used only when no CG step runs (the warm start ``x0`` already meets ``tol``, or
+    ``max_iter=0``): the result is then differentiated implicitly, so it still depends on ``b`` and ``params``.
 
     Args:
         apply_A: function ``v ↦ A v`` (symmetric positive definite, sample-wise).
@@ -116,8 +117,6 @@ def cg_solve(
         >>> b.grad.shape, mu.grad is not None
         (torch.Size([2, 1, 6, 6]), True)
     """
-    if not implicit:
-        return conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter)
     params = tuple(params)
     for i, p in enumerate(params):
         if not isinstance(p, torch.Tensor):
@@ -125,9 +124,21 @@ def cg_solve(
     needs_grad = torch.is_grad_enabled() and (
         (isinstance(b, torch.Tensor) and b.requires_grad) or any(p.requires_grad for p in params)
     )
+    if not implicit:
+        res = conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter)
+        if needs_grad and not res.x.requires_grad:
+            # No CG step ran (the detached warm start already met ``tol``, or max_iter=0), so the unrolled
+            # loop recorded no graph; x0 is the solution to tolerance, so differentiate it implicitly.
+            return _implicit(apply_A, b, x0, precond, tol, max_iter, params)
+        return res
     if not needs_grad:
         with torch.no_grad():
             return conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter)
+    return _implicit(apply_A, b, x0, precond, tol, max_iter, params)
+
+
+def _implicit(apply_A: Operator, b: torch.Tensor, x0: torch.Tensor | None, precond: Operator | None, tol: float,
+              max_iter: int, params: tuple) -> CGResult:
     x0_detached = x0.detach() if isinstance(x0, torch.Tensor) else x0
     settings = (apply_A, precond, tol, max_iter, params)
     x, iterations, residual, history = _ImplicitCG.apply(b, x0_detached, settings, *params)
