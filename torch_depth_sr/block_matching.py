@@ -589,7 +589,9 @@ def _c_source() -> str:
 def _load_clib():
     """Compile (once, cached under ``~/.cache/torch_depth_sr``) and load the C kernel; None if impossible.
 
-    Set ``TORCH_DEPTH_SR_NO_CEXT=1`` to disable it (then the numpy/OpenCV path runs).
+    Set ``TORCH_DEPTH_SR_NO_CEXT=1`` to disable it (then the numpy/OpenCV path runs). The cached
+    library is verified against its sha256 sidecar before it is loaded (a truncated file would kill
+    the process with SIGBUS inside ``dlopen``); a missing or mismatching sidecar means a rebuild.
     """
     global _CLIB, _CLIB_TRIED
     if _CLIB_TRIED:
@@ -601,8 +603,6 @@ def _load_clib():
     import hashlib
     import platform
     import shutil
-    import subprocess
-    import tempfile
 
     cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc") or shutil.which("clang")
     if cc is None:
@@ -614,19 +614,17 @@ def _load_clib():
                                                                     "torch_depth_sr")
     path = os.path.join(cache, f"bm_{key}.so")
     try:
-        if not os.path.exists(path):
-            os.makedirs(cache, exist_ok=True)
-            with tempfile.TemporaryDirectory() as tmp:
-                c_file = os.path.join(tmp, "bm.c")
-                with open(c_file, "w") as f:
-                    f.write(src)
-                out = os.path.join(tmp, "bm.so")
-                subprocess.run([cc, *flags, c_file, "-o", out, "-lm"], check=True, capture_output=True,
-                               timeout=120)
-                shutil.move(out, path + f".{os.getpid()}")
-                os.replace(path + f".{os.getpid()}", path)
+        if not _cache_is_intact(path):
+            _build_clib(cc, flags, src, path)
+        if not _cache_is_intact(path):  # e.g. another process replaced it mid-way, or the disk is full
+            raise OSError(f"the rebuilt {path} does not match its checksum")
         lib = ctypes.CDLL(path)
-    except Exception:  # no compiler, read-only home, sandbox: fall back to numpy/OpenCV
+    except Exception as exc:  # no compiler, read-only home, sandbox: fall back to numpy/OpenCV
+        if os.path.exists(path):  # a cache exists but cannot be used: say so once (this runs once per process)
+            import warnings
+
+            warnings.warn(f"torch_depth_sr: cannot use the cached C kernel {path} ({exc}); block matching falls "
+                          "back to numpy. Delete the file to rebuild it.", RuntimeWarning, stacklevel=3)
         return None
     i64, i32, dbl, vp = ctypes.c_int64, ctypes.c_int, ctypes.c_double, ctypes.c_void_p
     for name in ("bm_rows_f32", "bm_rows_f64"):
@@ -640,6 +638,65 @@ def _load_clib():
         fn.argtypes = [vp, vp, vp, vp, vp, i64, i32, real, real, vp, vp, vp, i64, i64]
     _CLIB = lib
     return lib
+
+
+def _sha256_file(path: str) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _cache_is_intact(path: str) -> bool:
+    """Whether ``path`` exists and matches the sha256 in ``path + '.sha256'`` (written after each build)."""
+    try:
+        with open(path + ".sha256") as f:
+            expected = f.read().strip()
+        return bool(expected) and _sha256_file(path) == expected
+    except OSError:
+        return False
+
+
+def _replace_atomically(path: str, data_from: str | None = None, text: str | None = None) -> None:
+    """Put a file at ``path`` by writing a temporary sibling and ``os.replace``: readers see old or new, never half."""
+    tmp = f"{path}.{os.getpid()}.tmp"
+    try:
+        if data_from is not None:
+            import shutil
+
+            shutil.copyfile(data_from, tmp)
+            os.chmod(tmp, 0o755)
+        else:
+            with open(tmp, "w") as f:
+                f.write(text or "")
+        with open(tmp, "rb") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def _build_clib(cc: str, flags: list, src: str, path: str) -> None:
+    """Compile the kernel in a temporary folder, then install it and its sha256 sidecar under ``path``."""
+    import subprocess
+    import tempfile
+
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        c_file = os.path.join(tmp, "bm.c")
+        with open(c_file, "w") as f:
+            f.write(src)
+        out = os.path.join(tmp, "bm.so")
+        subprocess.run([cc, *flags, c_file, "-o", out, "-lm"], check=True, capture_output=True, timeout=120)
+        digest = _sha256_file(out)
+        # library first, then its checksum: a reader between the two sees a mismatch and rebuilds (never loads
+        # an unverified file)
+        _replace_atomically(path, data_from=out)
+        _replace_atomically(path + ".sha256", text=digest + "\n")
 
 
 def _offset_order(search_window: int, stride: int, include_self: bool) -> np.ndarray:
