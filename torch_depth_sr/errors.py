@@ -2,6 +2,9 @@
 
 Every error says what arrived, what is allowed and, where there is one, the fix.
 """
+from __future__ import annotations
+
+from typing import Any
 
 
 class DepthSRError(ValueError):
@@ -20,4 +23,38 @@ class InvalidDepthError(DepthSRError):
     """Depth values cannot be used (all missing, negative, infinite)."""
 
 
-__all__ = ["DepthSRError", "DTypeError", "InvalidDepthError", "ShapeError"]
+class ParameterError(DepthSRError):
+    """A parameter (a :class:`~torch_depth_sr.config.RestorerConfig` field or a call argument) is out of its domain.
+
+    Attributes:
+        name: the parameter, e.g. ``"lam"`` or ``"noise_sigma"``.
+        got: the value that arrived.
+        allowed: what is allowed, in words (``"a finite number > 0"``).
+    """
+
+    def __init__(self, name: str, got: Any, allowed: str, hint: str = "") -> None:
+        self.name, self.got, self.allowed, self.hint = name, got, allowed, hint
+        shown = repr(got)
+        shown = shown if len(shown) <= 80 else shown[:77] + "..."
+        super().__init__(f"{name} must be {allowed}; got {shown}." + (f" {hint}" if hint else ""))
+
+    def __reduce__(self):  # picklable (DataLoader workers send errors to the main process)
+        return (type(self), (self.name, self.got, self.allowed, self.hint))
+
+
+class ModelFileError(DepthSRError):
+    """A saved model (``config.json``, ``state_dict.pt``) is missing, unreadable or not what :meth:`save` writes.
+
+    Attributes:
+        path: the file concerned.
+    """
+
+    def __init__(self, path: Any, message: str) -> None:
+        self.path, self.message = path, message
+        super().__init__(f"{path}: {message}")
+
+    def __reduce__(self):
+        return (type(self), (self.path, self.message))
+
+
+__all__ = ["DTypeError", "DepthSRError", "InvalidDepthError", "ModelFileError", "ParameterError", "ShapeError"]
