@@ -3,7 +3,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from dataclasses import dataclass, field
+from pathlib import Path
+from numbers import Integral, Real
+from typing import Any, Callable
+
+from .errors import ModelFileError, ParameterError
 
 
 @dataclass
@@ -69,10 +75,12 @@ class RestorerConfig:
     extra: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        bad = set(self.upsample_scale) - {"lam", "eta", "gamma", "mu1", "mu2"}
-        if bad or any(not float(v) > 0 for v in self.upsample_scale.values()):
-            raise ValueError(f"upsample_scale must map layer parameters ['eta', 'gamma', 'lam', 'mu1', 'mu2'] to "
-                             f"positive multipliers; got {self.upsample_scale!r}.")
+        """Refuse any field outside its domain, naming the field, the value and what is allowed."""
+        if isinstance(self.match_layers, list):  # JSON has no tuples
+            self.match_layers = tuple(self.match_layers)
+        for f in dataclasses.fields(self):
+            _FIELD_CHECKS.get(f.name, _unchecked)(f.name, getattr(self, f.name))
+        _check_cross_fields(self)
 
     def replace(self, **changes) -> "RestorerConfig":
         return dataclasses.replace(self, **changes)
@@ -82,14 +90,49 @@ class RestorerConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "RestorerConfig":
+        """Build from a dict such as ``json.loads(config.to_json())``; every value is checked (ParameterError)."""
+        if not isinstance(d, dict):
+            raise ParameterError("a RestorerConfig", d, "a dict (a JSON object) of field names to values")
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = set(d) - known
         if unknown:
-            raise ValueError(f"unknown RestorerConfig keys {sorted(unknown)}; allowed are {sorted(known)}.")
-        d = dict(d)
-        if "match_layers" in d:
-            d["match_layers"] = tuple(d["match_layers"])
+            raise ParameterError("keys", sorted(unknown), f"RestorerConfig fields ({', '.join(sorted(known))})",
+                                 "Remove or rename the unknown keys.")
         return cls(**d)
+
+
+def load_config_file(path: str | Path) -> RestorerConfig:
+    """Read a ``config.json`` written by :meth:`RestorerConfig.to_json` (or by hand).
+
+    Raises:
+        ModelFileError: the file is missing or unreadable, is not a JSON object (the message gives the line
+            and column of invalid JSON), or holds a field out of its domain (the message names the field).
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ModelFileError(path, "file not found; a saved model folder holds config.json and state_dict.pt "
+                                   "(DepthRestorer.save writes both).") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelFileError(path, f"cannot be read as UTF-8 text ({exc}).") from exc
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(path, f"invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}.") from exc
+    if not isinstance(d, dict):
+        raise ModelFileError(path, "must hold a JSON object of RestorerConfig fields, e.g. {\"num_layers\": 8}; "
+                                   f"got a JSON {_json_kind(d)}.")
+    try:
+        return RestorerConfig.from_dict(d)
+    except ParameterError as exc:
+        raise ModelFileError(path, f"invalid field: {exc}") from exc
+
+
+def _json_kind(v: Any) -> str:
+    if v is None:
+        return "null"
+    return {bool: "boolean", int: "number", float: "number", str: "string", list: "array"}.get(type(v), "value")
 
 
 ABLATIONS = {
@@ -104,3 +147,128 @@ ABLATIONS = {
 PRESETS = {
     "fast": dict(search_window=11, match_layers=(2,)),
 }
+
+
+# ---- field domains -------------------------------------------------------------------------------
+def _is_int(v: Any) -> bool:
+    return isinstance(v, Integral) and not isinstance(v, bool)
+
+
+def _is_real(v: Any) -> bool:
+    return isinstance(v, Real) and not isinstance(v, bool)
+
+
+def _int(lo: int, odd: bool = False) -> Callable[[str, Any], None]:
+    allowed = f"an {'odd ' if odd else ''}int >= {lo}"
+
+    def check(name: str, v: Any) -> None:
+        if not _is_int(v) or v < lo or (odd and v % 2 == 0):
+            hint = "The block is centred on the pixel, so its size is odd." if odd and _is_int(v) and v >= lo else ""
+            raise ParameterError(name, v, allowed, hint)
+    return check
+
+
+def _real(lo: float, hi: float = math.inf, lo_open: bool = True, hi_open: bool = False) -> Callable[[str, Any], None]:
+    left, right = "(" if lo_open else "[", ")" if hi_open or hi == math.inf else "]"
+    allowed = f"a finite number in {left}{lo:g}, {hi:g}{right}"
+    if hi == math.inf:
+        allowed = f"a finite number {'>' if lo_open else '>='} {lo:g}"
+
+    def check(name: str, v: Any) -> None:
+        ok = _is_real(v) and math.isfinite(v)
+        ok = ok and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+        if not ok:
+            raise ParameterError(name, v, allowed)
+    return check
+
+
+def _bool(name: str, v: Any) -> None:
+    if not isinstance(v, bool):
+        raise ParameterError(name, v, "True or False")
+
+
+def _choice(*options: str) -> Callable[[str, Any], None]:
+    def check(name: str, v: Any) -> None:
+        if not isinstance(v, str) or v not in options:
+            raise ParameterError(name, v, f"one of {list(options)}")
+    return check
+
+
+def _match_layers(name: str, v: Any) -> None:
+    # indices beyond num_layers are allowed: they never fire (the default (2, 5) serves 2-layer models too)
+    if not isinstance(v, tuple) or not all(_is_int(i) and i >= 0 for i in v):
+        raise ParameterError(name, v, "a tuple or list of layer indices (ints >= 0), e.g. (2, 5) or ()")
+
+
+def _upsample_jbu(name: str, v: Any) -> None:
+    allowed = "a dict with some of 'radius' (int >= 0), 'sigma_space' and 'sigma_color' (finite numbers > 0)"
+    if not isinstance(v, dict) or set(v) - {"radius", "sigma_space", "sigma_color"}:
+        raise ParameterError(name, v, allowed)
+    if "radius" in v and not (_is_int(v["radius"]) and v["radius"] >= 0):
+        raise ParameterError(name, v, allowed)
+    for key in ("sigma_space", "sigma_color"):
+        if key in v and not (_is_real(v[key]) and math.isfinite(v[key]) and v[key] > 0):
+            raise ParameterError(name, v, allowed)
+
+
+def _upsample_scale(name: str, v: Any) -> None:
+    names = ["eta", "gamma", "lam", "mu1", "mu2"]
+    ok = isinstance(v, dict) and not set(v) - set(names)
+    ok = ok and all(_is_real(m) and math.isfinite(m) and m > 0 for m in v.values())
+    if not ok:
+        raise ParameterError(name, v, f"a dict mapping layer parameters {names} to positive multipliers")
+
+
+def _unchecked(name: str, v: Any) -> None:
+    """A field without a domain yet (tests/test_input_safety.py requires one for every field)."""
+
+
+def _dict(name: str, v: Any) -> None:
+    if not isinstance(v, dict):
+        raise ParameterError(name, v, "a dict")
+
+
+_positive = _real(0.0)
+_FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
+    "num_layers": _int(1),
+    # the layer parameters are softplus-positive (0 would be a raw value of −inf)
+    "lam": _positive, "eta": _positive, "gamma": _positive, "mu1": _positive, "mu2": _positive,
+    "isotropic": _bool,
+    "init_fill": _choice("jbf", "pushpull"),
+    "guided_prior": _real(0.0, lo_open=False),
+    "prior_on_singular": _bool, "init_singular": _bool, "init_keep_observed": _bool,
+    "init_kernel_size": _int(1),
+    "init_sigma_space": _positive, "init_sigma_color": _positive,
+    "upsample_init": _choice("jbu", "bicubic"),
+    "upsample_jbu": _upsample_jbu,
+    "upsample_tv_per_factor": _bool,
+    "upsample_scale": _upsample_scale,
+    "use_nonlocal": _bool, "use_outliers": _bool, "use_singular": _bool,
+    "block_size": _int(1, odd=True),
+    "search_window": _int(1, odd=True),
+    "k": _int(1),
+    "color_weight": _real(0.0, lo_open=False),
+    "temperature": _positive,
+    "include_self": _bool,
+    "match_layers": _match_layers,
+    "singular_tau": _real(0.0, 1.0),
+    "singular_sigma_floor": _positive,
+    "singular_rounds": _int(1),
+    "singular_support": _int(0),
+    "singular_support_tol": _positive,
+    "singular_gate": _real(0.0, 1.0, lo_open=False),
+    "fidelity_band": _real(0.0, lo_open=False),
+    "cg_tol": _positive,
+    "cg_max_iter": _int(1),
+    "precondition": _bool, "implicit_backward": _bool,
+    "extra": _dict,
+}
+
+
+def _check_cross_fields(c: RestorerConfig) -> None:
+    """Constraints between fields (each field is already in its own domain)."""
+    candidates = c.search_window ** 2 - (0 if c.include_self else 1)
+    if c.k > candidates:
+        raise ParameterError("k", c.k, f"<= {candidates}, the number of candidate blocks in a "
+                             f"{c.search_window}x{c.search_window} search window (include_self={c.include_self})",
+                             "Use a smaller k or a larger search_window.")
