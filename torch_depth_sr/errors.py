@@ -57,4 +57,12 @@ class ModelFileError(DepthSRError):
         return (type(self), (self.path, self.message))
 
 
-__all__ = ["DTypeError", "DepthSRError", "InvalidDepthError", "ModelFileError", "ParameterError", "ShapeError"]
+class UsageError(DepthSRError):
+    """Arguments that cannot work: a missing file, an unknown format, an output that would replace an input.
+
+    The command line reports it with exit status 2, where it can before anything is read or written.
+    """
+
+
+__all__ = ["DTypeError", "DepthSRError", "InvalidDepthError", "ModelFileError", "ParameterError", "ShapeError",
+           "UsageError"]
