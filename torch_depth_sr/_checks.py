@@ -1,11 +1,13 @@
 """Shape and value checks for the public boundary (kept out of inner loops)."""
 from __future__ import annotations
 
-from typing import Sequence
+from numbers import Integral, Real
+from typing import Any, Optional, Sequence, Union
 
+import numpy as np
 import torch
 
-from .errors import DTypeError, ShapeError
+from .errors import DTypeError, ParameterError, ShapeError
 
 
 def check_4d(x: torch.Tensor, name: str, channels: int | Sequence[int] | None = None) -> None:
@@ -43,3 +45,60 @@ def check_min_size(x: torch.Tensor, name: str, min_hw: int, why: str) -> None:
     h, w = x.shape[-2:]
     if h < min_hw or w < min_hw:
         raise ShapeError(f"{name} is {h}x{w}; it must be at least {min_hw}x{min_hw} ({why}).")
+
+
+_SIGMA_ALLOWED = "None (estimate it), or a finite number > 0 in depth units, or one such number per sample"
+_SIGMA_ZERO_HINT = ("0 is not allowed: every weight of the model is in multiples of σ, so σ = 0 has no scale. For "
+                    "noise-free input pass the quantisation step / sqrt(12) (0.29 for integer depth) or omit it.")
+
+
+def check_noise_sigma(noise_sigma: Any, batch: int) -> Union[None, float, torch.Tensor]:
+    """Return ``noise_sigma`` as None, a float or a 1-D tensor of 1 or ``batch`` values; refuse anything else.
+
+    Raises:
+        ParameterError: not a real number or array of them, NaN/inf, <= 0, or neither 1 nor ``batch`` values.
+    """
+    if noise_sigma is None:
+        return None
+    if isinstance(noise_sigma, Real) and not isinstance(noise_sigma, bool):
+        _check_sigma_values(noise_sigma, np.array([float(noise_sigma)]))
+        return float(noise_sigma)
+    t = _sigma_tensor(noise_sigma)
+    if t.numel() not in (1, batch):
+        raise ParameterError("noise_sigma", noise_sigma, _SIGMA_ALLOWED,
+                             f"Got {t.numel()} values for a batch of {batch}.")
+    _check_sigma_values(noise_sigma, t.detach().cpu().double().numpy().reshape(-1))
+    return t.reshape(-1)
+
+
+def _sigma_tensor(noise_sigma: Any) -> torch.Tensor:
+    if isinstance(noise_sigma, torch.Tensor):
+        t = noise_sigma
+    else:
+        try:
+            arr = np.asarray(noise_sigma)
+        except (TypeError, ValueError):  # ragged lists
+            raise ParameterError("noise_sigma", noise_sigma, _SIGMA_ALLOWED) from None
+        if arr.dtype.kind not in "fiu":
+            raise ParameterError("noise_sigma", noise_sigma, _SIGMA_ALLOWED)
+        t = torch.from_numpy(arr.astype(np.float64))  # a native-order copy (big-endian and read-only arrays too)
+    if t.dtype == torch.bool or t.is_complex():
+        raise ParameterError("noise_sigma", noise_sigma, _SIGMA_ALLOWED)
+    return t
+
+
+def _check_sigma_values(noise_sigma: Any, values: np.ndarray) -> None:
+    if not np.isfinite(values).all() or (values < 0).any():
+        raise ParameterError("noise_sigma", noise_sigma, _SIGMA_ALLOWED)
+    if (values == 0).any():
+        raise ParameterError("noise_sigma", noise_sigma, _SIGMA_ALLOWED, _SIGMA_ZERO_HINT)
+
+
+def check_scale_factor(scale_factor: Any) -> Optional[int]:
+    """Return ``scale_factor`` as None or an int >= 1 (a float, even 2.0, is refused: it is not a grid factor)."""
+    if scale_factor is None:
+        return None
+    if isinstance(scale_factor, bool) or not isinstance(scale_factor, Integral) or scale_factor < 1:
+        raise ParameterError("scale_factor", scale_factor, "None (inferred from the sizes) or an int >= 1",
+                             "Guided upsampling needs colour exactly s times the depth size in both dims.")
+    return int(scale_factor)

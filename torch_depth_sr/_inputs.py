@@ -2,7 +2,8 @@
 
 Depth layouts: ``(H,W)``, ``(1,H,W)``, ``(B,1,H,W)``; dtypes float16/32/64, uint8, uint16, int32.
 0 or NaN means "no measurement". Colour: ``(B,3,H,W)``/``(3,H,W)`` float in [0,1] (torch or numpy),
-``H×W×3`` (numpy, RGB order) uint8 or float in [0,1], or ``(B,1,H,W)``/``H×W`` greyscale.
+``H×W×3`` (numpy, RGB order) uint8, uint16 or float in [0,1], or ``(B,1,H,W)``/``H×W`` greyscale.
+Numpy arrays may be big-endian or read-only (converted, never modified).
 """
 from __future__ import annotations
 
@@ -25,14 +26,25 @@ class DepthLayout:
     device: torch.device
 
 
+def native_array(x: np.ndarray) -> np.ndarray:
+    """``x`` in native byte order and writable, copied only when it is not (torch refuses byte-swapped
+    arrays and warns on read-only ones, though the library never writes to an input)."""
+    if not x.dtype.isnative:
+        return x.astype(x.dtype.newbyteorder("="))
+    if not x.flags.writeable:
+        return np.array(x)
+    return x
+
+
 def _as_tensor(x: Any, name: str) -> tuple[torch.Tensor, bool]:
     if isinstance(x, torch.Tensor):
         return x, False
     if isinstance(x, np.ndarray):
-        if x.dtype == np.uint16:  # torch.from_numpy supports uint16 only in recent versions; widen safely
-            return torch.from_numpy(x.astype(np.int32)), True
         if x.dtype.kind not in "fiub":
             raise DTypeError(f"{name} has numpy dtype {x.dtype}; allowed are float, unsigned/signed int or bool.")
+        x = native_array(x)
+        if x.dtype == np.uint16:  # torch.from_numpy supports uint16 only in recent versions; widen safely
+            return torch.from_numpy(x.astype(np.int32)), True
         return torch.from_numpy(np.ascontiguousarray(x)), True
     raise DTypeError(f"{name} must be a torch.Tensor or numpy.ndarray; got {type(x).__name__}.")
 
@@ -73,27 +85,46 @@ def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch
         raise InvalidDepthError(f"depth contains negative values (min {float(torch.nan_to_num(y).min()):g}); "
                                 "allowed are depth/disparity >= 0 with 0 or NaN meaning 'no measurement'.")
     observed = torch.isfinite(y) & (y > 0)
+    _check_some_measured(observed, "depth sample(s) {bad} have no measured pixel (all 0 or NaN); at least one "
+                                   "pixel > 0 is needed to restore a depth map.")
     if mask is not None:
-        m, _ = _as_tensor(mask, "mask")
-        if m.shape[-2:] != y.shape[-2:] or m.numel() != y.numel():
-            raise ShapeError(f"mask must have the same shape as depth; got mask {tuple(m.shape)} and depth "
-                             f"{tuple(t.shape if ndim == 4 else depth.shape)}.")
-        observed = observed & (m.reshape(y.shape).to(y.device) > 0)
+        m = _parse_mask(mask, y.shape, tuple(t.shape if ndim == 4 else depth.shape))
+        _check_some_measured(m.to(y.device), "mask marks no pixel of sample(s) {bad} as measured (all 0 or False); "
+                                             "values > 0 mean measured. Pass mask=None to use depth > 0 alone.")
+        observed = observed & m.to(y.device)
+        _check_some_measured(observed, "mask and depth share no measured pixel in sample(s) {bad}: where the mask is "
+                                       "nonzero the depth is 0 or NaN. Check that they belong together.")
     y = torch.where(observed, y, torch.zeros_like(y))
-    counts = observed.flatten(1).sum(1)
-    if bool((counts == 0).any()):
-        bad = torch.nonzero(counts == 0).flatten().tolist()
-        raise InvalidDepthError(f"depth sample(s) {bad} have no measured pixel (all 0 or NaN); "
-                                "at least one pixel > 0 is needed to restore a depth map.")
     layout = DepthLayout(was_numpy=was_numpy, ndim=ndim, dtype=orig_dtype, device=t.device)
     return y, observed.to(compute_dtype), layout
 
 
+def _parse_mask(mask: Any, shape: torch.Size, depth_shape: tuple) -> torch.Tensor:
+    """Return ``mask`` as a bool tensor of ``shape`` (nonzero = measured)."""
+    m, _ = _as_tensor(mask, "mask")
+    if m.is_complex():
+        raise DTypeError(f"mask has dtype {m.dtype}; complex masks are not allowed: use bool, integer or float "
+                         "(values > 0 mean measured).")
+    if m.shape[-2:] != shape[-2:] or m.numel() != shape.numel():
+        raise ShapeError(f"mask must have the same shape as depth; got mask {tuple(m.shape)} and depth {depth_shape}.")
+    return m.reshape(shape) > 0
+
+
+def _check_some_measured(observed: torch.Tensor, message: str) -> None:
+    counts = observed.flatten(1).sum(1)
+    if bool((counts == 0).any()):
+        raise InvalidDepthError(message.format(bad=torch.nonzero(counts == 0).flatten().tolist()))
+
+
 def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
-    """Return colour as ``(B,3,H,W)`` float in [0,1] on ``device``."""
+    """Return colour as ``(B,3,H,W)`` float in [0,1] on ``device``.
+
+    Integer colour is scaled by its dtype's range: uint16 by 65535, other integers (uint8) by 255.
+    """
+    full_scale = _integer_full_scale(rgb)
     t, was_numpy = _as_tensor(rgb, "rgb")
     if t.dtype == torch.bool or t.is_complex():
-        raise DTypeError(f"rgb has dtype {t.dtype}; allowed are uint8 (0..255) or float in [0,1].")
+        raise DTypeError(f"rgb has dtype {t.dtype}; allowed are uint8 (0..255), uint16 (0..65535) or float in [0,1].")
     is_int = not t.is_floating_point()
     if was_numpy and t.ndim == 3 and t.shape[-1] in (1, 3):
         t = t.permute(2, 0, 1)  # numpy colour is H×W×C -> (C,H,W)
@@ -104,14 +135,9 @@ def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) ->
     if t.ndim != 4 or t.shape[1] not in (1, 3):
         raise ShapeError(f"rgb must be (B,3,H,W), (3,H,W), H×W×3 (numpy) or greyscale; got {tuple(rgb.shape)}.")
     t = t.to(device=device, dtype=dtype)
+    _check_rgb_range(t.detach(), is_int, full_scale, rgb.dtype)  # detached: the checks read values only
     if is_int:
-        t = t / 255.0
-    if not bool(torch.isfinite(t).all()):
-        raise DTypeError("rgb contains NaN or inf; allowed are finite values in [0,1] (float) or 0..255 (uint8).")
-    lo, hi = float(t.min()), float(t.max())
-    if lo < -1e-3 or hi > 1 + 1e-3:
-        raise DTypeError(f"float rgb must lie in [0,1]; got values in [{lo:g}, {hi:g}]. "
-                         "Divide 8-bit colour by 255 (or pass it as uint8).")
+        t = t / full_scale
     if t.shape[1] == 1:
         t = t.expand(-1, 3, -1, -1)
     if t.shape[0] == 1 and batch > 1:
@@ -119,6 +145,27 @@ def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) ->
     if t.shape[0] != batch:
         raise ShapeError(f"rgb batch size {t.shape[0]} does not match depth batch size {batch}.")
     return t.clamp(0, 1).contiguous()
+
+
+def _integer_full_scale(rgb: Any) -> float:
+    """The value of white for integer colour: 65535 for uint16 (numpy or torch), else 255."""
+    if isinstance(rgb, np.ndarray):
+        return 65535.0 if rgb.dtype.kind == "u" and rgb.dtype.itemsize == 2 else 255.0
+    return 65535.0 if getattr(rgb, "dtype", None) == getattr(torch, "uint16", object()) else 255.0
+
+
+def _check_rgb_range(t: torch.Tensor, is_int: bool, full_scale: float, orig_dtype: Any) -> None:
+    if not bool(torch.isfinite(t).all()):
+        raise DTypeError("rgb contains NaN or inf; allowed are finite values in [0,1] (float) or 0..255 (uint8).")
+    lo, hi = float(t.min()), float(t.max())
+    if is_int and (lo < 0 or hi > full_scale):
+        raise DTypeError(f"integer rgb of dtype {orig_dtype} is read as {'16' if full_scale > 255 else '8'}-bit "
+                         f"(0..{full_scale:g}); got values in [{lo:g}, {hi:g}]. Pass 8-bit colour as uint8, "
+                         "16-bit colour as uint16, or float colour in [0,1].")
+    if not is_int and (lo < -1e-3 or hi > 1 + 1e-3):
+        hint = ("It looks like 16-bit colour: divide by 65535 (or pass it as uint16)." if hi > 255 + 1e-3 else
+                "Divide 8-bit colour by 255 (or pass it as uint8).")
+        raise DTypeError(f"float rgb must lie in [0,1]; got values in [{lo:g}, {hi:g}]. {hint}")
 
 
 def restore_layout(x: torch.Tensor, layout: DepthLayout) -> Any:

@@ -9,7 +9,7 @@ solved by half-quadratic splitting, one :class:`~torch_depth_sr.layers.UnrolledL
 """
 from __future__ import annotations
 
-import json
+import pickle
 import time
 from pathlib import Path
 from typing import Any, NamedTuple, Optional
@@ -18,9 +18,10 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import ABLATIONS, PRESETS, RestorerConfig
-from .errors import ShapeError
+from .config import ABLATIONS, PRESETS, RestorerConfig, load_config_file
+from .errors import DepthSRError, ModelFileError, ShapeError
 from .fill import fill_holes
 from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, singular_test, stage
 from .nonlocal_prior import nonlocal_gradient
@@ -109,7 +110,7 @@ class DepthRestorer(nn.Module):
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
                              f"{bs}x{bs}, the block size used by block matching.")
-        offset, scale, sigma = depth_scale(y, observed, noise_sigma)
+        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b))
         o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
         yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
         grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
@@ -127,7 +128,7 @@ class DepthRestorer(nn.Module):
             return out
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
                 "cg_iterations": state.cg_iterations, "factor": factor, "seconds": dict(state.timings)}
-        conf, trusted, outliers = (map_layout(t, layout) if factor == 1 else t
+        conf, trusted, outliers = (map_layout(t, layout)
                                    for t in (state.confidence * observed, state.q, state.e * s4))
         return RestorationResult(out, conf, trusted, outliers, info)
 
@@ -181,12 +182,19 @@ class DepthRestorer(nn.Module):
 
     @classmethod
     def load(cls, directory, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
-        """Load what :meth:`save` wrote (never unpickles arbitrary objects)."""
+        """Load what :meth:`save` wrote (never unpickles arbitrary objects).
+
+        Raises:
+            ModelFileError: the folder or a file is missing, ``config.json`` is not valid JSON or has a field
+                out of its domain, or ``state_dict.pt`` is not a state dict of this model; the message names the
+                file (and the field).
+        """
         d = Path(directory)
-        config = RestorerConfig.from_dict(json.loads((d / "config.json").read_text()))
-        model = cls(config, trainable=trainable)
-        state = torch.load(d / "state_dict.pt", map_location=map_location, weights_only=True)
-        model.load_state_dict(state)
+        if not d.is_dir():
+            raise ModelFileError(d, "no such folder; DepthRestorer.load needs the folder DepthRestorer.save wrote "
+                                    "(config.json and state_dict.pt).")
+        model = cls(load_config_file(d / "config.json"), trainable=trainable)
+        _load_state_file(model, d / "state_dict.pt", map_location)
         return model
 
     @classmethod
@@ -203,7 +211,7 @@ class DepthRestorer(nn.Module):
         root = Path(__file__).resolve().parent / "pretrained"
         available = sorted(p.name for p in root.iterdir() if (p / "state_dict.pt").is_file()) if root.is_dir() else []
         if name not in available:
-            raise ValueError(f"no pretrained parameters named {name!r}; available are {available} "
+            raise DepthSRError(f"no pretrained parameters named {name!r}; available are {available} "
                              f"(folders of {root} holding config.json and state_dict.pt).")
         return cls.load(root / name, trainable=trainable, map_location=map_location)
 
@@ -233,6 +241,7 @@ def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig) -> 
 
 
 def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:
+    scale_factor = check_scale_factor(scale_factor)
     h, w = y.shape[-2:]
     if rgb is None:
         if scale_factor not in (None, 1):
@@ -247,7 +256,7 @@ def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Op
         raise ShapeError(f"depth is {h}x{w} and rgb is {hh}x{ww}; allowed are equal sizes (restoration) or rgb "
                          "an integer multiple s of depth in both dims (guided upsampling by s). "
                          "Crop or resize so the sizes match.")
-    s = int(scale_factor)
+    s = scale_factor
     if (hh, ww) != (h * s, w * s):
         raise ShapeError(f"scale_factor={s} needs rgb of size {h * s}x{w * s} for depth {h}x{w}; got rgb {hh}x{ww}.")
     return s
@@ -282,3 +291,39 @@ def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig
     """
     return DepthRestorer(config, **overrides)(depth, rgb, mask=mask, noise_sigma=noise_sigma,
                                                scale_factor=scale_factor, return_details=return_details)
+
+_NOT_A_STATE_DICT = "not a torch_depth_sr state dict"
+
+
+def _load_state_file(model: nn.Module, path: Path, map_location) -> None:
+    """Read ``path`` with ``weights_only=True`` into ``model``; every failure names the file (ModelFileError)."""
+    if not path.is_file():
+        raise ModelFileError(path, "file not found; a saved model folder holds config.json and state_dict.pt "
+                                   "(DepthRestorer.save writes both).")
+    if path.stat().st_size == 0:
+        raise ModelFileError(path, f"{_NOT_A_STATE_DICT}: the file is empty. Save the model again "
+                                   "(DepthRestorer.save) or restore the file.")
+    try:
+        state = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as exc:  # torch's message suggests weights_only=False: never for a state dict
+        raise ModelFileError(path, f"{_NOT_A_STATE_DICT}: it holds Python objects other than tensors, which are "
+                                   "not loaded (unpickling them could run arbitrary code).") from exc
+    except Exception as exc:  # EOFError, RuntimeError (truncated zip), ...: torch names no single failure type
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ModelFileError(path, f"{_NOT_A_STATE_DICT}: it cannot be read as saved tensors ({first}). "
+                                   "It may be truncated or of another program.") from exc
+    _check_state_matches(model, state, path)
+    model.load_state_dict(state)
+
+
+def _check_state_matches(model: nn.Module, state: Any, path: Path) -> None:
+    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
+        raise ModelFileError(path, f"{_NOT_A_STATE_DICT}: it holds a {type(state).__name__}, not a dict of tensors.")
+    expected = model.state_dict()
+    missing, unexpected = sorted(set(expected) - set(state)), sorted(set(state) - set(expected))
+    wrong = sorted(k for k in set(expected) & set(state) if expected[k].shape != state[k].shape)
+    if missing or unexpected or wrong:
+        parts = [f"{what} {keys[:4]}{' ...' if len(keys) > 4 else ''}"
+                 for what, keys in (("missing", missing), ("unexpected", unexpected), ("wrong shape", wrong)) if keys]
+        raise ModelFileError(path, f"{_NOT_A_STATE_DICT} for the config.json next to it ({'; '.join(parts)}). "
+                                   "config.json and state_dict.pt must come from the same DepthRestorer.save.")

@@ -43,7 +43,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from .errors import DepthSRError
+from ._inputs import native_array
+from .errors import DepthSRError, DTypeError
 
 TUPLE_KEYS = ("depth", "rgb", "gt", "mask")
 Range = Union[float, Tuple[float, float]]
@@ -87,7 +88,7 @@ def _unpack(sample) -> Tuple[dict, Callable[[dict], Any]]:
 
 def _as_torch(x) -> Tuple[torch.Tensor, bool]:
     if isinstance(x, np.ndarray):
-        return torch.from_numpy(np.ascontiguousarray(x)), True
+        return torch.from_numpy(np.ascontiguousarray(native_array(x))), True
     if isinstance(x, torch.Tensor):
         return x, False
     raise DepthSRError(f"expected a torch tensor or numpy array; got {type(x).__name__}.")
@@ -107,6 +108,9 @@ def _depth_float(d) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, bool]:
     t, was_np = _as_torch(d)
     if t.dim() < 2:
         raise DepthSRError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.")
+    if t.dtype == torch.bool or t.is_complex():  # a bool map is a mask, not a depth (nothing to degrade)
+        raise DTypeError(f"depth has dtype {t.dtype}; allowed are float, unsigned or signed integer depth. A bool "
+                         "map is a validity mask: pass it as sample['mask'] next to the depth.")
     f = t.to(torch.float64 if t.dtype == torch.float64 else torch.float32)
     measured = torch.isfinite(f) & (f > 0)
     f = torch.where(measured, f, torch.zeros_like(f))
