@@ -1,0 +1,360 @@
+"""Issue 12, items 4 (parameter validation), 7, 8 and 10: every bad input is refused with one clear
+message, odd-but-valid inputs are accepted, training never loses its graph, loading names the file."""
+import json
+import math
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from torch_depth_sr import DepthRestorer, RestorerConfig, restore_depth
+from torch_depth_sr.config import ABLATIONS, PRESETS
+from torch_depth_sr.errors import DepthSRError, DTypeError, InvalidDepthError, ModelFileError, ParameterError
+from torch_depth_sr.solvers import cg_solve
+from torch_depth_sr.operators import laplacian
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = dict(num_layers=2, search_window=7, k=4)
+
+
+def _depth(h=24, w=32, seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return (100 + 5 * rng.random((h, w))).astype(np.float32)
+
+
+def _rgb(h=24, w=32, seed=1) -> np.ndarray:
+    return (np.random.default_rng(seed).random((h, w, 3)) * 255).astype(np.uint8)
+
+
+def _run_child(code: str, env_extra: dict | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT), **(env_extra or {}))
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, env=env,
+                          timeout=300)
+
+
+# ---- item 4: parameters --------------------------------------------------------------------------
+BAD_FIELDS = [
+    ("num_layers", 0), ("num_layers", 2.5), ("num_layers", True),
+    ("lam", -1.0), ("lam", 0.0), ("lam", float("nan")), ("lam", "one"), ("eta", -2.0), ("gamma", float("inf")),
+    ("mu1", 0), ("mu2", -0.5), ("guided_prior", -1.0), ("guided_prior", float("nan")),
+    ("isotropic", "yes"), ("init_fill", "bilateral"), ("upsample_init", "nearest"), ("init_kernel_size", 0),
+    ("init_sigma_space", 0.0), ("init_sigma_color", -1.0), ("upsample_jbu", {"radius": -1}),
+    ("upsample_jbu", {"size": 3}), ("upsample_scale", {"tau": 2.0}), ("block_size", 4), ("block_size", 0),
+    ("search_window", 8), ("k", 0), ("k", 2.5), ("k", 1000), ("color_weight", -1.0), ("temperature", 0.0),
+    ("match_layers", 3), ("match_layers", (1, -1)), ("match_layers", ("2",)), ("singular_tau", 0.0),
+    ("singular_tau", 1.5), ("singular_sigma_floor", 0.0), ("singular_rounds", 0), ("singular_gate", -0.1),
+    ("singular_gate", 2.0), ("cg_tol", 0.0), ("cg_tol", -1e-3), ("cg_max_iter", 0), ("precondition", 1),
+    ("extra", None),
+]
+
+
+@pytest.mark.parametrize("field,value", BAD_FIELDS, ids=[f"{f}={v!r}" for f, v in BAD_FIELDS])
+def test_config_field_out_of_domain_is_refused(field, value):
+    with pytest.raises(ParameterError) as err:
+        RestorerConfig(**{field: value})
+    msg = str(err.value)
+    assert msg.startswith(field) and "must be" in msg and "got" in msg
+    assert err.value.name == field
+    with pytest.raises(ParameterError):  # the same check guards the model's overrides
+        DepthRestorer(**{field: value})
+
+
+def test_every_config_field_has_a_domain():
+    import dataclasses
+
+    from torch_depth_sr.config import _FIELD_CHECKS
+
+    unchecked = {f.name for f in dataclasses.fields(RestorerConfig)} - set(_FIELD_CHECKS)
+    assert not unchecked, f"add a domain to config._FIELD_CHECKS for {sorted(unchecked)}"
+
+
+def test_valid_configs_still_construct():
+    RestorerConfig()
+    RestorerConfig(**TINY)
+    RestorerConfig(guided_prior=0.0, color_weight=0.0, singular_gate=0.0, match_layers=[], upsample_scale={})
+    for overrides in list(ABLATIONS.values()) + list(PRESETS.values()):
+        RestorerConfig(**overrides)
+    for f in (ROOT / "torch_depth_sr" / "pretrained").glob("*/config.json"):
+        RestorerConfig.from_dict(json.loads(f.read_text()))
+    assert RestorerConfig(k=np.int64(4), lam=np.float32(1.5), match_layers=[1]).match_layers == (1,)
+
+
+@pytest.mark.parametrize("sigma", [float("nan"), float("inf"), -1.0, 0.0, "1", [1.0, 2.0, 3.0], [[1.0]] * 3,
+                                   np.array([1.0, np.nan]), torch.tensor([0.5, -0.5]), True, 1j, object()])
+def test_invalid_noise_sigma_is_refused(sigma):
+    d = np.stack([_depth(), _depth(seed=1)])[:, None]
+    with pytest.raises(ParameterError, match="noise_sigma"):
+        restore_depth(d, None, noise_sigma=sigma, **TINY)
+
+
+def test_noise_sigma_forms_agree():
+    d = np.stack([_depth(), _depth(seed=1)])[:, None]
+    ref = restore_depth(d, None, noise_sigma=2.0, **TINY)
+    for form in (2, [2.0], [2.0, 2.0], np.array([2.0, 2.0], ">f8"), torch.tensor(2.0), torch.tensor([2.0, 2.0])):
+        np.testing.assert_array_equal(restore_depth(d, None, noise_sigma=form, **TINY), ref)
+
+
+@pytest.mark.parametrize("factor", [1.5, 2.0, 0, -2, "2", True])
+def test_scale_factor_must_be_a_positive_int(factor):
+    with pytest.raises(ParameterError, match="scale_factor"):
+        restore_depth(_depth(12, 16), _rgb(24, 32), scale_factor=factor, **TINY)
+
+
+# ---- item 7: training on flat crops --------------------------------------------------------------
+@pytest.mark.parametrize("implicit", [False, True])
+def test_flat_crop_trains(implicit):
+    torch.manual_seed(0)
+    model = DepthRestorer(trainable=True, implicit_backward=implicit, **TINY)
+    depth = torch.full((2, 1, 24, 32), 100.0)
+    out = model(depth, torch.rand(2, 3, 24, 32))
+    assert out.requires_grad
+    loss = ((out - 101.0) ** 2).mean()
+    loss.backward()
+    grads = [p.grad for p in model.parameters() if p.grad is not None]
+    assert grads and all(bool(torch.isfinite(g).all()) for g in grads)
+
+
+def test_cg_started_at_the_solution_keeps_the_graph():
+    """Unrolled CG that needs no step must still differentiate like the solution A⁻¹b."""
+    g = torch.Generator().manual_seed(0)
+    mu = torch.tensor(2.0, dtype=torch.float64, requires_grad=True)
+    b = torch.randn(2, 1, 6, 6, dtype=torch.float64, generator=g, requires_grad=True)
+
+    def apply_a(v):
+        return v + mu * laplacian(v)
+
+    cold = cg_solve(apply_a, b, tol=1e-12, max_iter=500, implicit=False, params=(mu,))
+    gb_cold, gmu_cold = torch.autograd.grad(cold.x.square().sum(), (b, mu))
+    warm = cg_solve(apply_a, b, x0=cold.x.detach(), tol=1e-6, max_iter=500, implicit=False, params=(mu,))
+    assert int(warm.iterations.max()) == 0 and warm.x.requires_grad
+    gb_warm, gmu_warm = torch.autograd.grad(warm.x.square().sum(), (b, mu))
+    torch.testing.assert_close(gb_warm, gb_cold, rtol=1e-5, atol=1e-8)
+    torch.testing.assert_close(gmu_warm, gmu_cold, rtol=1e-5, atol=1e-8)
+
+
+# ---- item 8: loading -----------------------------------------------------------------------------
+@pytest.fixture
+def saved(tmp_path) -> Path:
+    DepthRestorer(**TINY).save(tmp_path / "m")
+    return tmp_path / "m"
+
+
+def test_round_trip_still_loads(saved):
+    m = DepthRestorer.load(saved)
+    assert m.config.num_layers == 2 and m.config.match_layers == (2, 5)
+
+
+class _NotATensor:
+    pass
+
+
+@pytest.mark.parametrize("content", ["empty", "garbage", "pickle", "wrong_keys", "text"])
+def test_corrupt_state_dict_is_named(saved, content):
+    f = saved / "state_dict.pt"
+    if content == "empty":
+        f.write_bytes(b"")
+    elif content == "garbage":
+        f.write_bytes(os.urandom(300))
+    elif content == "text":
+        f.write_text("hello")
+    elif content == "pickle":
+        torch.save({"x": _NotATensor()}, f)
+    else:
+        torch.save({"foo": torch.zeros(1)}, f)
+    with pytest.raises(ModelFileError) as err:
+        DepthRestorer.load(saved)
+    msg = str(err.value)
+    assert str(f) in msg and "not a torch_depth_sr state dict" in msg
+    assert "weights_only" not in msg
+
+
+def test_truncated_state_dict_is_named(saved):
+    f = saved / "state_dict.pt"
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+    with pytest.raises(ModelFileError, match="not a torch_depth_sr state dict"):
+        DepthRestorer.load(saved)
+
+
+@pytest.mark.parametrize("field,value", [("lam", "one"), ("k", 2.5), ("match_layers", 3), ("num_layers", None),
+                                         ("use_nonlocal", "false"), ("bogus", 1)])
+def test_mistyped_config_field_is_named(saved, field, value):
+    f = saved / "config.json"
+    d = json.loads(f.read_text())
+    d[field] = value
+    f.write_text(json.dumps(d))
+    with pytest.raises(ModelFileError) as err:
+        DepthRestorer.load(saved)
+    assert str(f) in str(err.value) and field in str(err.value)
+
+
+def test_invalid_json_names_file_and_position(saved):
+    f = saved / "config.json"
+    f.write_text('{"lam": 1.0,\n "k": }')
+    with pytest.raises(ModelFileError) as err:
+        DepthRestorer.load(saved)
+    assert str(f) in str(err.value) and "line 2" in str(err.value) and "column" in str(err.value)
+
+
+@pytest.mark.parametrize("text", ["", "[1, 2]", "null", "\x00\x01"])
+def test_config_json_that_is_not_an_object(saved, text):
+    (saved / "config.json").write_text(text)
+    with pytest.raises(ModelFileError, match="config.json"):
+        DepthRestorer.load(saved)
+
+
+@pytest.mark.parametrize("missing", ["config.json", "state_dict.pt", ""])
+def test_missing_files_are_named(saved, missing):
+    target = saved / missing if missing else saved
+    if missing:
+        target.unlink()
+    else:
+        shutil.rmtree(saved)
+    with pytest.raises(ModelFileError) as err:
+        DepthRestorer.load(saved)
+    assert str(target) in str(err.value) or str(saved) in str(err.value)
+
+
+def test_unknown_pretrained_name_still_errors():
+    with pytest.raises(ValueError, match="no pretrained parameters named"):
+        DepthRestorer.from_pretrained("nope")
+
+
+_CHILD_BM = """
+    import torch, warnings
+    from torch_depth_sr.block_matching import _load_clib, block_match
+    g = torch.Generator().manual_seed(0)
+    d, rgb = torch.rand(1, 1, 24, 32, generator=g), torch.rand(1, 3, 24, 32, generator=g)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        lib = _load_clib()
+        a = block_match(d, rgb, None, block_size=3, search_window=7, k=4, backend="auto")
+    b = block_match(d, rgb, None, block_size=3, search_window=7, k=4, backend="numpy")
+    assert torch.equal(a.index, b.index) and torch.allclose(a.dist, b.dist)
+    print("lib", lib is not None, "warnings", len([w for w in caught if "cached C kernel" in str(w.message)]))
+"""
+
+
+@pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="needs a C compiler")
+def test_truncated_native_cache_is_rebuilt(tmp_path):
+    env = {"TORCH_DEPTH_SR_CACHE": str(tmp_path), "TORCH_DEPTH_SR_NO_CEXT": "0"}
+    first = _run_child(_CHILD_BM, env)
+    assert first.returncode == 0, first.stderr
+    assert "lib True" in first.stdout
+    (lib_file,) = tmp_path.glob("bm_*.so")
+    size = lib_file.stat().st_size
+    with open(lib_file, "r+b") as f:  # truncate in place, as a killed writer or a full disk would
+        f.truncate(size // 5)
+    second = _run_child(_CHILD_BM, env)
+    assert second.returncode == 0, f"exit {second.returncode}: {second.stderr[-2000:]}"
+    assert "lib True warnings 0" in second.stdout  # rebuilt silently
+    assert lib_file.stat().st_size == size
+    # the cache is corrupt and cannot be rebuilt (no compiler): numpy is used, with one warning
+    with open(lib_file, "r+b") as f:
+        f.truncate(size // 5)
+    third = _run_child(_CHILD_BM, dict(env, CC="/bin/false"))
+    assert third.returncode == 0, f"exit {third.returncode}: {third.stderr[-2000:]}"
+    assert "lib False warnings 1" in third.stdout
+
+
+# ---- item 10: smaller ----------------------------------------------------------------------------
+@pytest.mark.parametrize("dtype", [">f4", ">f8", ">u2", ">i4"])
+def test_big_endian_depth_is_accepted(dtype):
+    d = _depth().astype(dtype)
+    out = restore_depth(d, _rgb(), **TINY)
+    native = restore_depth(d.astype(np.dtype(dtype).newbyteorder("=")), _rgb(), **TINY)
+    assert out.dtype == d.dtype
+    np.testing.assert_array_equal(out, native)
+
+
+def test_big_endian_rgb_and_mask_are_accepted():
+    d, rgb = _depth(), _rgb()
+    mask = np.ones(d.shape, ">u2")
+    mask[0, 0] = 0
+    ref = restore_depth(d, rgb, mask=mask.astype(np.uint16), **TINY)
+    out = restore_depth(d, (rgb / 255).astype(">f4"), mask=mask, **TINY)
+    np.testing.assert_allclose(out, ref, atol=1e-3)
+
+
+@pytest.mark.parametrize("as_torch", [False, True])
+def test_complex_mask_is_refused(as_torch):
+    mask = np.ones((24, 32), np.complex64)
+    with pytest.raises(DTypeError, match="mask.*complex"):
+        restore_depth(_depth(), _rgb(), mask=torch.from_numpy(mask) if as_torch else mask, **TINY)
+
+
+def test_all_zero_mask_blames_the_mask():
+    with pytest.raises(InvalidDepthError) as err:
+        restore_depth(_depth(), _rgb(), mask=np.zeros((24, 32)), **TINY)
+    assert str(err.value).startswith("mask")
+
+
+def test_uint16_colour_is_accepted_as_16_bit():
+    rgb8 = _rgb()
+    rgb16 = rgb8.astype(np.uint16) * 257  # the same colour in 16 bits
+    a = restore_depth(_depth(), rgb8, **TINY)
+    b = restore_depth(_depth(), rgb16, **TINY)
+    np.testing.assert_allclose(a, b, atol=1e-3)
+    b_torch = restore_depth(_depth(), torch.from_numpy(rgb16.astype(np.int32)).permute(2, 0, 1).to(torch.uint16),
+                            **TINY)
+    np.testing.assert_allclose(a, b_torch, atol=1e-3)
+
+
+def test_wide_integer_colour_gets_a_16_bit_hint():
+    with pytest.raises(DTypeError, match="uint16"):
+        restore_depth(_depth(), _rgb().astype(np.int32) * 257, **TINY)
+
+
+def test_detail_maps_follow_the_depth_type_when_upsampling():
+    res = restore_depth(_depth(12, 16), _rgb(), return_details=True, **TINY)
+    assert isinstance(res.depth, np.ndarray) and res.depth.shape == (24, 32)
+    for m in (res.confidence, res.trusted, res.outliers):
+        assert isinstance(m, np.ndarray) and m.shape == (12, 16) and m.dtype == np.float32
+
+
+def test_no_torch_warnings_for_read_only_arrays_or_colour_requiring_grad():
+    # torch warns once per process, so a fresh one tells whether the library triggers the warning at all
+    code = """
+        import warnings, numpy as np, torch
+        warnings.simplefilter("error")
+        from torch_depth_sr import restore_depth
+        from torch_depth_sr.transforms import AddGaussianNoise
+        S = dict(num_layers=2, search_window=7, k=4)
+        d = (100 + 5 * np.random.default_rng(0).random((24, 32))).astype(np.float32)
+        rgb = (np.random.default_rng(1).random((24, 32, 3)) * 255).astype(np.uint8)
+        m = np.ones((24, 32), np.uint8)
+        for a in (d, rgb, m):
+            a.flags.writeable = False
+        restore_depth(d, rgb, mask=m, **S)
+        restore_depth(d.astype(np.uint16), rgb, **S)
+        AddGaussianNoise(1.0)({"depth": d})
+        restore_depth(torch.from_numpy(d.copy()), torch.rand(3, 24, 32, requires_grad=True), **S)
+        print("clean")
+    """
+    child = _run_child(code)
+    assert child.returncode == 0 and "clean" in child.stdout, child.stderr[-2000:]
+
+
+@pytest.mark.parametrize("name", ["AddGaussianNoise", "AddHoles", "AddImpulses", "AddFlyingPixels", "Downsample"])
+def test_transforms_refuse_bool_depth_clearly(name):
+    from torch_depth_sr import transforms
+
+    t = getattr(transforms, name)(2) if name == "Downsample" else getattr(transforms, name)()
+    with pytest.raises(DTypeError, match="depth.*bool"):
+        t({"depth": torch.ones(24, 32, dtype=torch.bool)})
+
+
+def test_transforms_accept_big_endian_and_read_only_depth():
+    from torch_depth_sr.transforms import AddGaussianNoise
+
+    d = _depth().astype(">f4")
+    d.flags.writeable = False
+    out = AddGaussianNoise(1.0, seed=0)({"depth": d, "name": "a"})["depth"]
+    ref = AddGaussianNoise(1.0, seed=0)({"depth": d.astype(np.float32), "name": "a"})["depth"]
+    np.testing.assert_array_equal(out, ref)
+    assert out.dtype.kind == "f" and out.dtype.itemsize == 4
