@@ -7,6 +7,8 @@ then refines the filled values with its regularisers.
 """
 from __future__ import annotations
 
+from typing import NamedTuple, Optional
+
 import torch
 import torch.nn.functional as F
 
@@ -56,3 +58,175 @@ def _push_pull(weighted: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
     up = F.interpolate(coarse, size=(h, w), mode="bilinear", align_corners=False)
     has = (weight > 0).to(estimate.dtype)
     return has * estimate + (1 - has) * up
+
+
+# --------------------------------------------------------------------------------------------
+# depth-gap-aware fill: holes at a discontinuity take the values of ONE side, never a mixture
+# --------------------------------------------------------------------------------------------
+class SidedFill(NamedTuple):
+    """Result of :func:`fill_holes_sided` (all ``(B,1,H,W)``)."""
+
+    depth: torch.Tensor  # filled depth, equal to the input where measured
+    confident: torch.Tensor  # {0,1}: 1 where measured or filled with a clear side
+    gap: torch.Tensor  # {0,1}: 1 at hole pixels whose neighbourhood spans a depth gap
+    share: torch.Tensor  # weight share of the chosen side (1 where no gap)
+
+
+def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torch.Tensor] = None, *,
+                     kernel_size: int = 11, sigma_space: float = 6.0, sigma_color: float = 0.025,
+                     gap: float = 4.0, min_share: float = 0.75, passes: int = 8,
+                     quantiles: tuple = (0.1, 0.9), choice_sigma_space: Optional[float] = None) -> SidedFill:
+    r"""Fill holes without bridging depth gaps: each hole takes the values of one side of an edge.
+
+    For every hole pixel :math:`p` the measured pixels :math:`q` of its ``kernel_size`` window
+    (weights :math:`w_q = f_s(\|p-q\|)\,f_c(\|I_p-I_q\|)`, Gaussian in space and colour, as the
+    masked joint bilateral filter) are examined:
+
+    * If their spread (``quantiles`` of the measured values) is at most ``gap`` (in the units of
+      ``depth``; the model passes depth normalised by the noise σ, so it is ``gap`` σ), the window
+      holds one surface and the pixel gets the plain weighted mean (masked JBF).
+    * Otherwise the window spans a depth gap. Its measured values are split into two sides by
+      2-means (seeded at the two quantiles); values in the middle third between the two side means
+      (flying pixels) are dropped. The pixel takes the side with the larger weight mass
+      :math:`\sum_{q \in \text{side}} w_q` (colour similarity and nearness: a sensor shadow has the
+      colour of the background it lies on, so it is filled from the background) and the weighted
+      mean of that side only. It is *confident* when that side holds at least ``min_share`` of
+      the mass, otherwise the side is a guess and ``confident`` is 0 there.
+
+    Holes deeper than the window are filled in up to ``passes`` rounds, each treating the pixels
+    filled so far as measured (so the sides keep propagating apart, and a pixel filled from an
+    unconfident one is unconfident too); what is left after that is filled by push-pull
+    (:func:`fill_holes`) and marked unconfident. The rule needs no convention for which way
+    depth grows (depth or disparity): the side is chosen by colour and nearness, not by value.
+
+    Args:
+        depth: ``(B,1,H,W)``; values where ``mask == 0`` are ignored.
+        mask: ``(B,1,H,W)``, 1 = measured.
+        rgb: ``(B,3,H,W)`` guide in [0,1], or None (then the side is chosen by nearness alone).
+        kernel_size: odd window size (px).
+        sigma_space, sigma_color: Gaussian widths in px and in [0,1] colour units (L2 over RGB).
+        gap: spread above which a window counts as spanning a depth gap (depth units).
+        min_share: weight share of the chosen side needed to call the fill confident.
+        passes: propagation rounds before the push-pull fallback.
+        quantiles: the low/high quantiles of the measured values that measure the spread.
+
+    Returns:
+        :class:`SidedFill` ``(depth, confident, gap)``.
+
+    Examples:
+        >>> y = torch.zeros(1, 1, 8, 12); y[..., :, :6] = 10.; y[..., :, 7:] = 50.  # column 6 missing
+        >>> rgb = torch.zeros(1, 3, 8, 12); rgb[:, :, :, 6:] = 1.  # the hole has the right side's colour
+        >>> r = fill_holes_sided(y, (y > 0).float(), rgb, kernel_size=5)
+        >>> r.depth[0, 0, 0, 6].item(), r.confident[0, 0, 0, 6].item()
+        (50.0, 1.0)
+    """
+    check_4d(depth, "depth", 1)
+    check_4d(mask, "mask", 1)
+    check_same_hw(depth, mask, "depth", "mask")
+    if kernel_size < 3 or kernel_size % 2 == 0:
+        raise ValueError(f"kernel_size must be an odd int >= 3; got {kernel_size}.")
+    b, _, h, w = depth.shape
+    dt = depth.dtype
+    known = mask > 0
+    x = torch.where(known, depth, torch.zeros_like(depth))
+    conf = known.to(dt)
+    gapped = torch.zeros_like(conf)
+    shares = torch.ones_like(conf)
+    filled = known.clone()
+    r = kernel_size // 2
+    dy, dx = torch.meshgrid(torch.arange(-r, r + 1, device=depth.device), torch.arange(-r, r + 1, device=depth.device),
+                            indexing="ij")
+    dy, dx = dy.reshape(-1), dx.reshape(-1)
+    ws = torch.exp(-(dy ** 2 + dx ** 2).to(dt) / (2 * sigma_space ** 2))  # (K²,)
+    wch = ws if choice_sigma_space is None else torch.exp(-(dy ** 2 + dx ** 2).to(dt) / (2 * choice_sigma_space ** 2))
+    guide = None if rgb is None else rgb.to(dt)
+    allow_weak = guide is None
+    for _ in range(max(1, passes) + 1):
+        todo = ~filled
+        if not bool(todo.any()):
+            break
+        bi, _, yi, xi = torch.nonzero(todo, as_tuple=True)  # (N,)
+        yy = (yi[:, None] + dy[None]).clamp(-1, h)  # (N, K²); -1 / h = outside
+        xx = (xi[:, None] + dx[None]).clamp(-1, w)
+        inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
+        yc, xc = yy.clamp(0, h - 1), xx.clamp(0, w - 1)
+        bb = bi[:, None].expand_as(yc)
+        v = x[bb, 0, yc, xc]  # (N, K²)
+        m = (filled[bb, 0, yc, xc] & inside).to(dt)
+        c = conf[bb, 0, yc, xc]
+        wgt = ws[None] * m
+        wc = torch.ones_like(m)
+        if guide is not None:
+            d2 = (guide[bb, :, yc, xc] - guide[bi, :, yi, xi][:, None, :]).pow(2).sum(-1)  # (N, K², 3) -> (N, K²)
+            wc = torch.exp(-d2 / (2 * sigma_color ** 2))
+            wgt = wgt * wc
+        has = m.sum(1) > 0
+        wsum = wgt.sum(1)
+        # pixels none of whose measured neighbours has a similar colour wait for the propagation from the side
+        # they match; only when a pass fills nothing else are they filled by nearness (space weights) alone
+        weak = (wc * m).amax(1) < _MATCH if guide is not None else torch.zeros_like(has)
+        wgt = torch.where(weak[:, None], ws[None] * m, wgt)
+        # spread of the measured values
+        vn = torch.where(m > 0, v, torch.full_like(v, float("nan")))
+        lo, hi = _nanquantiles(vn, quantiles)
+        spans = has & (hi - lo > gap)
+        # 2-means seeded at the quantiles
+        ca, cb = lo, hi
+        for _it in range(2):
+            mid = 0.5 * (ca + cb)
+            in_b = (v > mid[:, None]) & (m > 0)
+            in_a = (v <= mid[:, None]) & (m > 0)
+            ca = _masked_mean(v, in_a, ca)
+            cb = _masked_mean(v, in_b, cb)
+        third = (cb - ca) / 3
+        side_a = in_a & (v <= (ca + third)[:, None])
+        side_b = in_b & (v >= (cb - third)[:, None])
+        wchoice = wch[None] * m * wc
+        wchoice = torch.where(weak[:, None], wch[None] * m, wchoice)
+        wa = (wchoice * side_a).sum(1)
+        wb = (wchoice * side_b).sum(1)
+        pick_b = wb > wa
+        side = torch.where(pick_b[:, None], side_b, side_a)
+        share = torch.maximum(wa, wb) / (wa + wb).clamp_min(1e-30)
+        use = torch.where(spans[:, None], side.to(dt), torch.ones_like(m)) * wgt
+        den = use.sum(1)
+        est = (use * v).sum(1) / den.clamp_min(1e-30)
+        ok = has & (den > 0)
+        if not allow_weak:
+            if not bool((ok & ~weak).any()):
+                allow_weak = True
+                continue
+            ok = ok & ~weak
+        c_in = (use * c).sum(1) / den.clamp_min(1e-30)  # confidence of what the value came from
+        c_new = torch.where(spans, (share >= min_share).to(dt), torch.ones_like(share)) * (c_in > 0.5).to(dt)
+        bi, yi, xi = bi[ok], yi[ok], xi[ok]
+        x[bi, 0, yi, xi] = est[ok]
+        conf[bi, 0, yi, xi] = c_new[ok]
+        gapped[bi, 0, yi, xi] = spans[ok].to(dt)
+        shares[bi, 0, yi, xi] = torch.where(spans, share, torch.ones_like(share))[ok]
+        filled[bi, 0, yi, xi] = True
+    if not bool(filled.all()):
+        rest = fill_holes(x, filled.to(dt))
+        x = torch.where(filled, x, rest)
+    return SidedFill(x, conf, gapped, shares)
+
+
+_MATCH = 1e-3  # colour weight above which a neighbour "looks like" the pixel (distance < 3.7 sigma_color)
+
+
+def _nanquantiles(v: torch.Tensor, qs) -> list:
+    """Row-wise quantiles (nearest rank) of ``v (N,K)`` ignoring NaN; NaN rows give 0."""
+    n = (~torch.isnan(v)).sum(1)
+    s = torch.sort(torch.nan_to_num(v, nan=float("inf")), dim=1).values
+    out = []
+    for qq in qs:
+        k = ((n - 1).clamp_min(0).to(v.dtype) * qq).round().long()
+        val = s.gather(1, k[:, None])[:, 0]
+        out.append(torch.where(n > 0, val, torch.zeros_like(val)))
+    return out
+
+
+def _masked_mean(v: torch.Tensor, sel: torch.Tensor, default: torch.Tensor) -> torch.Tensor:
+    cnt = sel.sum(1)
+    mean = (v * sel).sum(1) / cnt.clamp_min(1)
+    return torch.where(cnt > 0, mean, default)

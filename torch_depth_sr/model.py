@@ -97,8 +97,9 @@ class DepthRestorer(nn.Module):
         return cls(**{**PRESETS[name], **overrides})
 
     def forward(self, depth, rgb=None, mask=None, noise_sigma=None, scale_factor: Optional[int] = None,
-                return_details: bool = False):
+                return_details: bool = False, fill: str = "all"):
         """Restore ``depth`` guided by ``rgb``; see :func:`restore_depth` for the arguments."""
+        _check_fill(fill)
         dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
         y, observed, layout = parse_depth(depth, mask, dtype)
         dev = self.log_temperature.device  # compute where the model lives; the result goes back to the input's device
@@ -123,6 +124,8 @@ class DepthRestorer(nn.Module):
             torch.cuda.synchronize(state.x.device)
         state.timings["total"] = time.perf_counter() - t0
         x = state.x * s4 + o4
+        if fill == "trusted":
+            x = _leave_unconfident_missing(x, ctx, observed, factor, layout)
         out = restore_layout(x, layout)
         if not return_details:
             return out
@@ -136,7 +139,8 @@ class DepthRestorer(nn.Module):
         c = self.config
         ctx = RestorationContext(y=yn, observed=observed, rgb=guide, factor=factor, config=c,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp())
-        guided = initial_estimate(yn, observed, guide, factor, c)  # colour-guided estimate, every pixel
+        # colour-guided estimate, every pixel; holes at depth gaps filled from one side (fill_holes_sided)
+        guided, ctx.fill_confident, _ = initial_estimate(yn, observed, guide, factor, c, return_fill=True)
         keep = c.init_keep_observed and guided is not None
         x0 = torch.where(observed > 0, yn, guided) if keep else guided
         b = yn.shape[0]
@@ -216,19 +220,75 @@ class DepthRestorer(nn.Module):
         return cls.load(root / name, trainable=trainable, map_location=map_location)
 
 
-def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:
-    """x⁰ on the observation grid: push-pull fill, or a colour-guided normalised convolution (masked JBF)."""
-    if guide is None or c.init_fill == "pushpull":
-        return fill_holes(yn, observed)
-    if c.init_fill != "jbf":
-        raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'jbf' and 'pushpull'.")
-    from .baselines.jbf import joint_bilateral_filter
+# Depth-gap-aware hole fill of x⁰ (torch_depth_sr.fill.fill_holes_sided), switched and tuned through
+# ``config.extra``: ``{"sided_fill": False}`` restores the plain masked-JBF / push-pull fill of the holes;
+# ``{"sided_fill_params": {...}}`` overrides the arguments below (gap in noise-σ units of the normalised depth).
+SIDED_FILL_DEFAULTS = dict(gap=4.0, min_share=0.75, passes=8, choice_sigma_space=1.5, ambiguous="mix")
 
-    g = guide if factor == 1 else F.avg_pool2d(guide, factor)
-    kernel = min(c.init_kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
-    kernel -= 1 - kernel % 2
-    return joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.init_sigma_space,
-                                  sigma_color=c.init_sigma_color)
+
+def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig, return_fill: bool = False):
+    """x⁰ on the observation grid: push-pull fill, or a colour-guided normalised convolution (masked JBF).
+
+    Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` (unless ``config.extra["sided_fill"]``
+    is False, or ``init_fill == "pushpull"``): a hole next to a depth gap takes the values of one side.
+    With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}: ``confident`` =
+    measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from one side.
+    """
+    sided = bool(c.extra.get("sided_fill", True)) and c.init_fill != "pushpull"
+    if guide is None or c.init_fill == "pushpull":
+        est = fill_holes(yn, observed)
+        g = None
+    else:
+        if c.init_fill != "jbf":
+            raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'jbf' and 'pushpull'.")
+        from .baselines.jbf import joint_bilateral_filter
+
+        g = guide if factor == 1 else F.avg_pool2d(guide, factor)
+        kernel = min(c.init_kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
+        kernel -= 1 - kernel % 2
+        est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.init_sigma_space,
+                                     sigma_color=c.init_sigma_color)
+    confident = torch.ones_like(observed)
+    one_side = torch.zeros_like(observed)
+    if sided and not bool((observed > 0).all()):
+        from .fill import fill_holes_sided
+
+        params = {**SIDED_FILL_DEFAULTS, **c.extra.get("sided_fill_params", {})}
+        ambiguous = params.pop("ambiguous")
+        kernel = max(3, min(c.init_kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
+        with torch.no_grad():
+            r = fill_holes_sided(yn.detach(), observed, g, kernel_size=kernel, sigma_space=c.init_sigma_space,
+                                 sigma_color=c.init_sigma_color, **params)
+        # ambiguous="mix": a hole whose side is not clear keeps the weighted mean of both (marked unconfident)
+        take = (r.confident > 0) | (ambiguous != "mix") | (g is None)
+        hole = observed <= 0
+        est = torch.where(hole & take, r.depth.to(est.dtype), est)
+        confident = torch.where(hole, r.confident, confident)
+        one_side = (hole & take & (r.gap > 0)).to(observed.dtype)
+    return (est, confident, one_side) if return_fill else est
+
+
+FILL_MODES = ("all", "trusted")
+
+
+def _check_fill(fill) -> None:
+    if not isinstance(fill, str) or fill not in FILL_MODES:
+        raise ValueError(f"fill={fill!r}; allowed are {FILL_MODES}: 'all' fills every hole, 'trusted' leaves "
+                         "holes whose fill is not confident as missing (0 for integer output, NaN for float).")
+
+
+def _leave_unconfident_missing(x, ctx, observed, factor: int, layout):
+    """``fill="trusted"``: holes whose fill is not confident become 0 (integer output) or NaN (float)."""
+    ok = getattr(ctx, "fill_confident", None)
+    if ok is None:
+        return x
+    missing = (observed <= 0) & (ok <= 0)  # (B,1,h,w)
+    if factor > 1:
+        missing = F.interpolate(missing.to(x.dtype), scale_factor=factor, mode="nearest") > 0
+    dt = layout.dtype
+    integer = (not dt.is_floating_point) if isinstance(dt, torch.dtype) else (dt is not None and
+                                                                            __import__("numpy").dtype(dt).kind in "iub")
+    return x.masked_fill(missing, 0.0 if integer else float("nan"))
 
 
 def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig) -> torch.Tensor:
@@ -263,7 +323,8 @@ def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Op
 
 
 def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig] = None, noise_sigma=None,
-                  scale_factor: Optional[int] = None, return_details: bool = False, **overrides):
+                  scale_factor: Optional[int] = None, return_details: bool = False, fill: str = "all",
+                  **overrides):
     r"""Restore a depth map in one call (functional form of :class:`DepthRestorer`).
 
     Args:
@@ -290,7 +351,7 @@ def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig
         (dtype('uint16'), 1000, 1000)
     """
     return DepthRestorer(config, **overrides)(depth, rgb, mask=mask, noise_sigma=noise_sigma,
-                                               scale_factor=scale_factor, return_details=return_details)
+                                               scale_factor=scale_factor, return_details=return_details, fill=fill)
 
 _NOT_A_STATE_DICT = "not a torch_depth_sr state dict"
 
