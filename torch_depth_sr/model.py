@@ -338,6 +338,9 @@ def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig
         noise_sigma: the noise std in depth units; estimated from the input when omitted.
         scale_factor: guided upsampling factor; inferred from the sizes when omitted.
         return_details: return a :class:`RestorationResult` with the confidence and outlier maps.
+        fill: ``"all"`` (default) fills every hole. ``"trusted"`` leaves as missing the holes whose fill is
+            not confident (a hole at a depth gap whose side the colour does not make clear, or one too far
+            from any measurement): 0 in integer output, NaN in float output. Their confidence is 0 either way.
 
     Returns:
         The restored depth in the input's layout, type and units (uint16 in → uint16 out), or a
