@@ -57,6 +57,8 @@ def test_bench_config_overrides_reach_the_model_and_bad_ones_are_refused():
     a = run_method("full", sample, config=_parse_config(json.dumps(small)))
     b = run_method("full", sample, config={**small, "block_size": 5})
     assert a.shape == (1, 1, 40, 40) and not torch.equal(a, b)
+    from torch_depth_sr.errors import UsageError
+
     for bad in ('{"block_sise": 5}', "[1, 2]", "{not json"):
-        with pytest.raises(SystemExit, match="--config"):
+        with pytest.raises(UsageError, match="--config"):
             _parse_config(bad)

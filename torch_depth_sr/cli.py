@@ -93,6 +93,24 @@ def cmd_demo(args) -> int:
     return 0
 
 
+RESTORE_HELP = """\
+Restore depth maps: a file, or a folder of them (with an optional colour file or folder, paired by name).
+
+Output format: from -o's suffix: .png (uint8 or uint16), .pfm (float32), .npy (any dtype), .tif/.tiff (integers,
+float32, float64) or .pgm (uint16, little-endian). The output always has the input's dtype and units; a format
+that cannot hold them (float into PNG, integers into PFM) is refused with the formats that can, nothing converted.
+An unknown suffix (.txt, or lossy .jpg) is refused before anything is read. -o FOLDER (an existing folder or a
+name ending in /) writes FOLDER/<input name>; a folder of inputs keeps each file's name and format.
+
+Safety: an existing output is kept unless --overwrite (or skipped with --skip-existing, which resumes an
+interrupted folder); an input is replaced only with --in-place, a colour image never. Files are written whole
+(a temporary .<name>.*.part file next to the output, then renamed). In a folder, a file that fails is reported
+at the end and the others are written (exit status 1).
+
+Exit status: 0 done, 1 a file could not be restored or written, 2 a usage mistake (nothing was written).
+"""
+
+
 def cmd_restore(args) -> int:
     from .restore_files import restore_paths
 
@@ -105,9 +123,42 @@ def cmd_bench(args) -> int:
     return run_bench(args)
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage block), like every other mistake of the command line."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {v}")
+    return v
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {v}")
+    return v
+
+
+def _add_debug(p: argparse.ArgumentParser, default=False) -> None:
+    p.add_argument("--debug", action="store_true", default=default,
+                   help="show the Python traceback of an error instead of its one-line message")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="torch-depth-sr", description="Colour-guided depth-map restoration.")
-    sub = p.add_subparsers(dest="command", required=True)
+    p = _Parser(prog="torch-depth-sr", description="Colour-guided depth-map restoration.")
+    _add_debug(p)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     d = sub.add_parser("demo", help="restore a synthetic scene (no files needed) and print a table")
     d.add_argument("--out", default="out/demo", help="folder for the PNG figure")
@@ -117,15 +168,25 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--seed", type=int, default=0)
     d.set_defaults(func=cmd_demo)
 
-    r = sub.add_parser("restore", help="restore depth files (PNG 8/16-bit, PFM, NPY) or folders of them")
+    r = sub.add_parser("restore", help="restore depth files (PNG 8/16-bit, PFM, NPY, TIFF) or folders of them",
+                       description=RESTORE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("depth", help="depth file or folder")
     r.add_argument("rgb", nargs="?", default=None, help="colour file or folder (same names/order)")
-    r.add_argument("-o", "--output", required=True, help="output file or folder")
+    r.add_argument("-o", "--output", default=None,
+                   help="output file (format from its suffix) or folder; required unless --in-place")
+    exists = r.add_mutually_exclusive_group()
+    exists.add_argument("--overwrite", action="store_true", help="replace existing output files (never inputs)")
+    exists.add_argument("--skip-existing", action="store_true",
+                        help="keep existing outputs and restore only the others (resume an interrupted folder)")
+    r.add_argument("--in-place", action="store_true",
+                   help="allow the result to replace its depth input (without -o: always); never a colour image")
     r.add_argument("--device", default="cpu")
-    r.add_argument("--scale-factor", type=int, default=None, help="guided upsampling factor (default: from sizes)")
-    r.add_argument("--confidence", default=None, help="also write the confidence map (PNG 8-bit) here")
+    r.add_argument("--scale-factor", type=_positive_int, default=None,
+                   help="guided upsampling factor (default: from the sizes of depth and colour)")
+    r.add_argument("--confidence", default=None,
+                   help="also write the confidence map (8-bit PNG, 255 = trusted) to this .png file or folder")
     r.add_argument("--pretrained", default=None, help="name of shipped parameters (see DepthRestorer.from_pretrained)")
-    r.add_argument("--workers", type=int, default=0, help="DataLoader workers for folders")
+    r.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers for folders")
     r.set_defaults(func=cmd_restore)
 
     b = sub.add_parser("bench", help="benchmarks on the shared Middlebury data (see README)")
@@ -146,12 +207,79 @@ def build_parser() -> argparse.ArgumentParser:
     from .training.cli import add_train_parser
 
     add_train_parser(sub)
+    for name, sp in sub.choices.items():
+        _add_debug(sp, default=argparse.SUPPRESS)  # also after the command; SUPPRESS keeps the top-level value
     return p
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
-    return args.func(args)
+    """Run the command line; returns the exit status (0 done, 1 failure, 2 usage mistake), never raises
+    except with ``--debug``, which lets the exception and its traceback through."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as e:  # --help (0), or an argument error already printed on one line (2)
+        return e.code if isinstance(e.code, int) else 2
+    try:
+        _check_device(getattr(args, "device", None))
+        return args.func(args)
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print("torch-depth-sr: interrupted (outputs already written are complete)", file=sys.stderr)
+        return 130
+    except SystemExit as e:  # a library part that still exits by itself with a message
+        if args.debug or not isinstance(e.code, str):
+            raise
+        print(f"torch-depth-sr: error: {_single_line(e.code)}", file=sys.stderr)
+        return 2
+    except Exception as e:  # noqa: BLE001 - every mistake is one line; --debug shows the traceback
+        if args.debug:
+            raise
+        from .errors import UsageError
+
+        print(f"torch-depth-sr: error: {describe_error(e)}", file=sys.stderr)
+        return 2 if isinstance(e, UsageError) else 1
+
+
+def describe_error(e: BaseException) -> str:
+    """One line for an exception: the library's message, or the OS's with the file, or the type and message."""
+    from .errors import DepthSRError
+
+    if isinstance(e, DepthSRError):
+        text = str(e)
+    elif isinstance(e, OSError) and e.strerror:
+        where = f" '{e.filename}'" if e.filename else ""
+        text = f"{e.strerror}:{where}" if where else e.strerror
+    else:
+        text = f"{type(e).__name__}: {e} (unexpected; rerun with --debug for the traceback)"
+    return _single_line(text)
+
+
+def _single_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _check_device(name) -> None:
+    """Refuse a device torch does not know or cannot use here, before any work."""
+    if name is None:
+        return
+    from .errors import UsageError
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, TypeError) as e:
+        raise UsageError(f"--device {name!r} is not a device ({_single_line(e)}); use cpu, cuda or cuda:N") from e
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            why = "this torch is built without CUDA" if torch.version.cuda is None else "no CUDA GPU is visible"
+            raise UsageError(f"--device {name}: CUDA is not available ({why}); use --device cpu")
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise UsageError(f"--device {name}: there are only {torch.cuda.device_count()} CUDA device(s); "
+                             f"use cuda:0 to cuda:{torch.cuda.device_count() - 1}")
+    elif dev.type == "mps" and not torch.backends.mps.is_available():
+        raise UsageError(f"--device {name}: MPS is not available here; use --device cpu")
+    elif dev.type not in ("cpu", "cuda", "mps"):
+        raise UsageError(f"--device {name}: this command runs on cpu, cuda or mps")
 
 
 if __name__ == "__main__":

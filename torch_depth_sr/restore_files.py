@@ -1,105 +1,352 @@
-"""``torch-depth-sr restore``: files or folders of depth (+ colour) in, same names, units and dtype out."""
+"""``torch-depth-sr restore``: files or folders of depth (+ colour) in, same names, units and dtype out.
+
+Every argument is checked before anything is read or written (:func:`plan_restore`, :class:`UsageError`):
+the output format comes from ``-o``'s suffix, an existing output is kept unless ``--overwrite`` (or skipped with
+``--skip-existing``), an input is replaced only with ``--in-place`` and a colour image never. A map is written
+with its input's dtype or not at all, atomically. In a folder, a file that fails is reported at the end and the
+others are still written.
+"""
 from __future__ import annotations
 
+import os
+import sys
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from .datasets.io import read_depth, read_rgb, write_npy, write_pfm, write_png_depth
-from .errors import DepthSRError
+from .datasets.io import DEPTH_SUFFIXES, depth_suffixes_for, read_depth_stored, read_rgb, write_depth, \
+    write_png_depth
+from .errors import DepthSRError, ModelFileError, UsageError
 
-DEPTH_EXTS = (".png", ".pfm", ".npy", ".pgm", ".tif", ".tiff")
+DEPTH_EXTS = DEPTH_SUFFIXES
 RGB_EXTS = (".png", ".jpg", ".jpeg", ".ppm", ".bmp", ".tif", ".tiff")
+FORMATS_HELP = (".png (uint8 or uint16), .pfm (float32), .npy (any dtype), .tif/.tiff (what OpenCV stores: "
+                "integers, float32, float64) or .pgm (uint16, little-endian)")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One depth file to restore and where its results go."""
+
+    depth: Path
+    rgb: Optional[Path]
+    target: Path
+    confidence: Optional[Path] = None
+    skip: bool = False  # --skip-existing and the target exists
 
 
 class DepthFilePairs(Dataset):
-    """Pairs (depth file, colour file or None), read in DataLoader workers."""
+    """Jobs read in DataLoader workers: ``{"index", "depth" (stored dtype), "rgb", "error"}``.
 
-    def __init__(self, depth_paths: list[Path], rgb_paths: list[Path | None]):
-        self.depth_paths, self.rgb_paths = depth_paths, rgb_paths
+    A file that cannot be read comes back with its exception in ``"error"`` so that the others go on.
+    """
+
+    def __init__(self, jobs: list[Job]):
+        self.jobs = jobs
 
     def __len__(self) -> int:
-        return len(self.depth_paths)
+        return len(self.jobs)
 
     def __getitem__(self, i: int) -> dict:
-        d = read_depth(self.depth_paths[i])
-        rgb = None if self.rgb_paths[i] is None else read_rgb(self.rgb_paths[i])
-        return {"index": i, "depth": d, "rgb": rgb}
+        job = self.jobs[i]
+        try:
+            d = read_depth_stored(job.depth)
+            rgb = None if job.rgb is None else read_rgb(job.rgb)
+        except Exception as e:  # noqa: BLE001 - reported with the file's name by the caller
+            return {"index": i, "depth": None, "rgb": None, "error": e}
+        return {"index": i, "depth": d, "rgb": rgb, "error": None}
+
+
+def _keep(item: dict) -> dict:
+    """DataLoader ``collate_fn``: arrays as read (the default turns them into tensors, losing uint16 and byte order)."""
+    return item
+
+
+# ---- planning: every check that needs no file content ---------------------------------------------------------
+
+def plan_restore(args) -> list[Job]:
+    """The jobs of a ``restore`` command line, or :class:`UsageError` before anything is read or written."""
+    depth_in = Path(args.depth)
+    rgb_in = Path(args.rgb) if args.rgb else None
+    if args.output is None and not args.in_place:
+        raise UsageError("the following argument is required: -o/--output (or --in-place to replace the input)")
+    if args.in_place and args.skip_existing:
+        raise UsageError("--in-place and --skip-existing contradict each other (every output exists: it is the "
+                         "input); use one of them")
+    _check_input(depth_in, "depth")
+    if rgb_in is not None:
+        _check_input(rgb_in, "colour")
+    if args.scale_factor not in (None, 1) and rgb_in is None:
+        raise UsageError(f"--scale-factor {args.scale_factor} needs the high-resolution colour image: "
+                         "torch-depth-sr restore DEPTH RGB -o OUT --scale-factor N")
+    jobs = _plan_folder(depth_in, rgb_in, args) if depth_in.is_dir() else [_plan_file(depth_in, rgb_in, args)]
+    return _check_targets(jobs, args)
+
+
+def _check_input(p: Path, what: str) -> None:
+    if not p.exists():
+        raise UsageError(f"{what} input '{p}' does not exist; check the path")
+    if p.is_file() and what == "depth" and p.suffix.lower() not in DEPTH_EXTS:
+        raise UsageError(f"depth input '{p}' has the suffix '{p.suffix}'; allowed are {', '.join(DEPTH_EXTS)} "
+                         "(lossy formats such as JPEG cannot hold depth)")
+
+
+def _is_folder_arg(arg: str) -> bool:
+    """An existing folder, or a name ending in a path separator (a folder to create)."""
+    return Path(arg).is_dir() or arg.endswith(("/", os.sep))
+
+
+def _plan_file(depth: Path, rgb: Optional[Path], args) -> Job:
+    if rgb is not None and rgb.is_dir():
+        raise UsageError(f"depth '{depth}' is a file, so the colour must be a file too; got the folder '{rgb}'")
+    if args.output is None:
+        target = depth
+    elif _is_folder_arg(args.output):
+        target = Path(args.output) / depth.name
+    else:
+        target = Path(args.output)
+        if target.suffix.lower() not in DEPTH_EXTS:
+            what = f"the suffix '{target.suffix}'" if target.suffix else "no suffix"
+            raise UsageError(f"-o '{target}' has {what}; name the output {FORMATS_HELP}, or give an existing "
+                             "folder (or a name ending in /) to write the input's name inside it")
+    return Job(depth, rgb, target, _confidence_path(args.confidence, depth, folder=False))
+
+
+def _confidence_path(arg: Optional[str], depth: Path, folder: bool) -> Optional[Path]:
+    if arg is None:
+        return None
+    if folder or _is_folder_arg(arg):
+        if Path(arg).is_file():
+            raise UsageError(f"--confidence '{arg}' is a file; a folder of depth maps needs a folder of confidences")
+        return Path(arg) / f"{depth.stem}_confidence.png"
+    if Path(arg).suffix.lower() != ".png":
+        raise UsageError(f"--confidence '{arg}' must end in .png (an 8-bit map, 255 = fully trusted) or be a folder")
+    return Path(arg)
+
+
+def _plan_folder(depth_dir: Path, rgb_dir: Optional[Path], args) -> list[Job]:
+    if rgb_dir is not None and not rgb_dir.is_dir():
+        raise UsageError(f"depth '{depth_dir}' is a folder, so the colour must be a folder too; got the file '{rgb_dir}'")
+    out = depth_dir if args.output is None else Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"-o '{out}' is a file; a folder of depth maps needs an output folder")
+    if not out.exists() and out.suffix.lower() in DEPTH_EXTS and not args.output.endswith(("/", os.sep)):
+        raise UsageError(f"-o '{out}' looks like a file name, but the depth input is a folder; give an output folder")
+    depths, rgbs = _pair_folders(depth_dir, rgb_dir)
+    return [Job(d, c, out / d.name, _confidence_path(args.confidence, d, folder=True)) for d, c in zip(depths, rgbs)]
 
 
 def _pair_folders(depth_dir: Path, rgb_dir: Path | None) -> tuple[list[Path], list[Path | None]]:
-    depths = sorted(p for p in depth_dir.iterdir() if p.suffix.lower() in DEPTH_EXTS)
+    # names starting with "." are skipped: hidden files, and the temporary files of an interrupted run
+    depths = sorted(p for p in depth_dir.iterdir()
+                    if p.suffix.lower() in DEPTH_EXTS and p.is_file() and not p.name.startswith("."))
     if not depths:
-        raise DepthSRError(f"no depth files ({', '.join(DEPTH_EXTS)}) in folder {depth_dir}")
+        raise UsageError(f"no depth files ({', '.join(DEPTH_EXTS)}) in the folder '{depth_dir}'")
     if rgb_dir is None:
         return depths, [None] * len(depths)
-    rgbs = {p.stem: p for p in rgb_dir.iterdir() if p.suffix.lower() in RGB_EXTS}
+    rgbs = {p.stem: p for p in rgb_dir.iterdir()
+            if p.suffix.lower() in RGB_EXTS and p.is_file() and not p.name.startswith(".")}
     missing = [p.name for p in depths if p.stem not in rgbs]
     if not missing:
         return depths, [rgbs[p.stem] for p in depths]
     ordered = sorted(rgbs.values())
     if len(ordered) != len(depths):
-        raise DepthSRError(f"colour folder {rgb_dir} has no file with the same name as {missing[:3]}... and holds "
-                           f"{len(ordered)} colour files for {len(depths)} depth files; pair them by name or by "
-                           "sorted order with equal counts.")
+        raise UsageError(f"colour folder '{rgb_dir}' has no file named like {', '.join(missing[:3])}"
+                         f"{', ...' if len(missing) > 3 else ''} and holds {len(ordered)} colour files for "
+                         f"{len(depths)} depth files; pair them by name (a.png with a.jpg) or by sorted order with "
+                         "equal counts")
     return depths, ordered
 
 
-def write_like(path: Path, src: Path, depth: np.ndarray) -> None:
-    """Write ``depth`` to ``path`` in the format and dtype that ``src`` had."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ext = src.suffix.lower()
-    if ext == ".pfm":
-        write_pfm(path, depth.astype(np.float32))
-    elif ext == ".npy":
-        write_npy(path, depth)
-    else:
-        if path.suffix.lower() not in (".png", ".tif", ".tiff"):
-            path = path.with_suffix(".png")
-        write_png_depth(path, depth, bits=8 if depth.dtype == np.uint8 else 16)
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
+def _check_targets(jobs: list[Job], args) -> list[Job]:
+    """Refuse outputs that would replace an input or an existing file; mark those that --skip-existing skips."""
+    depths = [j.depth for j in jobs]
+    colours = [j.rgb for j in jobs if j.rgb is not None]
+    planned, existing = [], []
+    for job in jobs:
+        outputs = [job.target] + ([job.confidence] if job.confidence else [])
+        for out in outputs:
+            if any(_same_file(out, c) for c in colours):
+                raise UsageError(f"the output '{out}' is a colour input; choose another output (colour is never "
+                                 "replaced, not even with --in-place)")
+            replaces_depth = [d for d in depths if _same_file(out, d)]
+            if replaces_depth and not (args.in_place and out is job.target and replaces_depth == [job.depth]):
+                raise UsageError(f"the output '{out}' would replace the input '{replaces_depth[0]}'; add --in-place "
+                                 "to replace the input with its restored map, or choose another output")
+            if out.is_dir():
+                raise UsageError(f"the output '{out}' is a folder; choose a file name")
+            if out.exists() and not replaces_depth and not args.overwrite:
+                existing.append((job, out))
+            _check_writable(out)
+    skipped = {id(j) for j, out in existing if args.skip_existing and out == j.target}
+    # a confidence map left by an interrupted run is made again with its depth map
+    refused = [out for j, out in existing if not args.skip_existing]
+    if refused:
+        raise UsageError(f"{_files(refused)} already exist{'s' if len(refused) == 1 else ''}; add --overwrite to "
+                         "replace, or --skip-existing to keep what exists and restore the rest (nothing was written)")
+    for job in jobs:
+        planned.append(Job(job.depth, job.rgb, job.target, job.confidence, skip=id(job) in skipped))
+    return planned
+
+
+def _files(paths: list[Path]) -> str:
+    shown = ", ".join(f"'{p}'" for p in paths[:3])
+    return shown if len(paths) <= 3 else f"{len(paths)} outputs ({shown}, ...)"
+
+
+def _check_writable(out: Path) -> None:
+    folder = out.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent  # the folder that the missing ones will be created in
+    if not folder.is_dir():
+        raise UsageError(f"cannot write '{out}': '{folder}' is a file, not a folder; choose another output")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise UsageError(f"cannot write '{out}': no permission to write in the folder '{folder}'")
+
+
+# ---- running -----------------------------------------------------------------------------------------------------
+
+def restore_paths(args) -> int:
+    """Run ``restore``: 0 when every output was written or skipped.
+
+    Raises:
+        UsageError: before anything is read or written, or (one file) when ``-o`` cannot hold the input's dtype.
+        DepthSRError: one file failed, or some files of a folder failed (each is reported on stderr first).
+    """
+    jobs = plan_restore(args)
+    model = _load_model(args)
+    if not Path(args.depth).is_dir():
+        return _restore_single(model, jobs[0], args)
+    return _restore_folder(model, jobs, args)
+
+
+def _load_model(args):
+    from .model import DepthRestorer
+
+    if not args.pretrained:
+        return DepthRestorer().to(args.device)
+    try:
+        model = DepthRestorer.from_pretrained(args.pretrained)
+    except ModelFileError:
+        raise  # shipped files that cannot be read: a failure, not a usage mistake
+    except ValueError as e:
+        raise UsageError(f"--pretrained {args.pretrained!r}: {e}") from e
+    return model.to(args.device)
+
+
+def _restore_single(model, job: Job, args) -> int:
+    if job.skip:
+        print(f"skipped {job.target} (exists; --skip-existing)")
+        return 0
+    try:
+        depth = read_depth_stored(job.depth)
+        rgb = None if job.rgb is None else read_rgb(job.rgb)
+        written = _restore_one(model, job, depth, rgb, args)
+    except UsageError:
+        raise
+    except DepthSRError as e:
+        raise DepthSRError(_with_path(e, job.depth)) from e
+    for p in written:
+        print(f"wrote {p}")
+    return 0
+
+
+def _restore_folder(model, jobs: list[Job], args) -> int:
+    from .cli import describe_error
+
+    todo = [j for j in jobs if not j.skip]
+    loader = DataLoader(DepthFilePairs(todo), batch_size=None, num_workers=args.workers, collate_fn=_keep)
+    failures, done = [], 0
+    # disable=None: a bar on terminals, nothing in logs
+    bar = tqdm(loader, total=len(todo), desc="restore", unit="file", disable=None)
+    for item in bar:
+        job = todo[item["index"]]
+        try:
+            if item["error"] is not None:
+                raise item["error"]
+            _restore_one(model, job, item["depth"], item["rgb"], args)
+            done += 1
+        except Exception as e:  # noqa: BLE001 - one bad file must not lose the others; --debug stops here
+            if getattr(args, "debug", False):
+                raise
+            failures.append((job, e))
+            bar.set_postfix(failed=len(failures))
+    bar.close()
+    out = jobs[0].target.parent
+    skipped = len(jobs) - len(todo)
+    print(f"wrote {done} of {len(jobs)} files to {out}" + (f" (skipped {skipped} existing)" if skipped else ""))
+    if not failures:
+        return 0
+    for job, e in failures:
+        print(f"torch-depth-sr: {_with_path(e, job.depth, describe_error(e))}", file=sys.stderr)
+    names = ", ".join(j.depth.name for j, _ in failures[:3]) + (", ..." if len(failures) > 3 else "")
+    raise DepthSRError(f"{len(failures)} of {len(todo)} files failed ({names}; see above); the others were written "
+                       "- fix or remove those files and rerun with --skip-existing")
+
+
+def _with_path(e: BaseException, path: Path, text: Optional[str] = None) -> str:
+    text = str(e) if text is None else text
+    return text if str(path) in text else f"{path}: {text}"
+
+
+def _restore_one(model, job: Job, depth: np.ndarray, rgb: Optional[np.ndarray], args) -> list[Path]:
+    """Restore one map and write it (confidence first, so an existing depth output means a finished file)."""
+    suffix = job.target.suffix.lower()
+    if suffix not in depth_suffixes_for(depth.dtype):
+        raise UsageError(f"-o '{job.target}': {suffix} cannot hold the input's {depth.dtype.name} depth without "
+                         f"changing it; write it as {_formats_for(depth.dtype)} (the output "
+                         "keeps the input's dtype and units; nothing was written)")
+    rgb_t = None if rgb is None else torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1)[None].to(args.device)
+    with torch.no_grad():
+        res = model(_to_model_input(depth), rgb_t, scale_factor=args.scale_factor, return_details=True)
+    restored = _as_numpy(res.depth).astype(depth.dtype, copy=False)
+    written = []
+    if job.confidence is not None:
+        conf = _as_numpy(res.confidence).astype(np.float64)
+        job.confidence.parent.mkdir(parents=True, exist_ok=True)
+        write_png_depth(job.confidence, conf.reshape(conf.shape[-2:]) * 255, bits=8)
+        written.append(job.confidence)
+    job.target.parent.mkdir(parents=True, exist_ok=True)
+    write_depth(job.target, _stored_layout(restored, job.depth))
+    return [job.target] + written
+
+
+def _formats_for(dtype) -> str:
+    names = " or ".join(depth_suffixes_for(dtype))
+    return names.replace(".tif or .tiff", ".tif/.tiff")
+
+
+def _as_numpy(x) -> np.ndarray:
+    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
 
 
 def _to_model_input(depth: np.ndarray) -> np.ndarray:
+    if not depth.dtype.isnative:  # torch reads native byte order only; the output gets the input's back
+        depth = depth.astype(depth.dtype.newbyteorder("="))
     if depth.dtype.kind == "f":
         return np.where(np.isfinite(depth), depth, np.nan)  # PFM marks unknown with inf
     return depth
 
 
-def restore_paths(args) -> int:
-    from .model import DepthRestorer
-
-    model = DepthRestorer.from_pretrained(args.pretrained) if args.pretrained else DepthRestorer()
-    model = model.to(args.device)
-    depth_in, out = Path(args.depth), Path(args.output)
-    rgb_in = Path(args.rgb) if args.rgb else None
-    if depth_in.is_dir():
-        if rgb_in is not None and not rgb_in.is_dir():
-            raise DepthSRError(f"depth {depth_in} is a folder, so rgb must be a folder too; got {rgb_in}")
-        depths, rgbs = _pair_folders(depth_in, rgb_in)
-        targets = [out / p.name for p in depths]
-    else:
-        depths, rgbs, targets = [depth_in], [rgb_in], [out]
-    loader = DataLoader(DepthFilePairs(depths, rgbs), batch_size=None, num_workers=args.workers)
-    for item in tqdm(loader, total=len(depths), desc="restore", unit="frame", disable=len(depths) < 2):
-        i = item["index"]
-        d = item["depth"]
-        d = d.numpy() if isinstance(d, torch.Tensor) else d
-        rgb = item["rgb"]
-        rgb_t = None if rgb is None else torch.as_tensor(np.asarray(rgb)).permute(2, 0, 1)[None].to(args.device)
-        with torch.no_grad():
-            res = model(_to_model_input(d), rgb_t, scale_factor=args.scale_factor, return_details=True)
-        write_like(targets[i], depths[i], np.asarray(res.depth))
-        if getattr(args, "confidence", None):
-            conf_dir = Path(args.confidence)
-            conf_path = conf_dir / (depths[i].stem + "_confidence.png") if len(depths) > 1 or conf_dir.is_dir() \
-                else conf_dir
-            conf_map = res.confidence.cpu().numpy() if isinstance(res.confidence, torch.Tensor) else res.confidence
-            conf = (np.asarray(conf_map).reshape(conf_map.shape[-2:]) * 255).round().astype(np.uint8)
-            conf_path.parent.mkdir(parents=True, exist_ok=True)
-            write_png_depth(conf_path, conf, bits=8)
-        if len(depths) == 1:
-            print(f"wrote {targets[i]}")
-    return 0
+def _stored_layout(out: np.ndarray, src: Path) -> np.ndarray:
+    """An NPY map goes back with the singleton axis it was stored with, ``(1, H, W)`` or ``(H, W, 1)``."""
+    if src.suffix.lower() != ".npy":
+        return out
+    shape = np.load(str(src), mmap_mode="r").shape
+    if len(shape) == 3 and shape[0] == 1:
+        return out[None]
+    if len(shape) == 3 and shape[-1] == 1:
+        return out[..., None]
+    return out

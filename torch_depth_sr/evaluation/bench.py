@@ -10,6 +10,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from ..errors import UsageError
 from ..fill import fill_holes
 from .methods import DENOISE_METHODS, UPSAMPLE_METHODS, run_method
 
@@ -26,7 +27,8 @@ def _samples(track: str, root, scenes, sigma):
         wanted = {s.lower() for s in scenes}
         records = [r for r in records if r.name.lower() in wanted]
     if not records:
-        raise SystemExit(f"no scenes of track {track!r} under {root} (scenes filter: {scenes})")
+        raise UsageError(f"no scenes of track {track!r} under {root} (scenes filter: {scenes}); check --data and "
+                         "--scenes")
     if track in ("paper", "sensor"):
         kw = {} if sigma is None else {"sigma": sigma}
         degrade = make_degradation(track, **kw)
@@ -67,13 +69,13 @@ def _parse_config(text):
     try:
         overrides = json.loads(text)
     except json.JSONDecodeError as e:
-        raise SystemExit(f"--config must be a JSON object of RestorerConfig overrides; got {text!r} ({e}).")
+        raise UsageError(f"--config must be a JSON object of RestorerConfig overrides; got {text!r} ({e}).") from e
     if not isinstance(overrides, dict):
-        raise SystemExit(f"--config must be a JSON object of RestorerConfig overrides; got {text!r}.")
+        raise UsageError(f"--config must be a JSON object of RestorerConfig overrides; got {text!r}.")
     try:
         RestorerConfig.from_dict(overrides)
     except (TypeError, ValueError) as e:
-        raise SystemExit(f"--config: {e}")
+        raise UsageError(f"--config: {e}") from e
     return overrides
 
 
