@@ -168,8 +168,9 @@ def test_an_input_is_never_overwritten_without_in_place(tmp_path, capfd):
     rgb = tmp_path / "rgb.png"
     cv2.imwrite(str(rgb), np.full((H, W, 3), 128, np.uint8))
     (tmp_path / "link.png").symlink_to(src)
+    os.link(src, tmp_path / "hard.png")
     before = _snapshot(tmp_path)
-    for target in (src, tmp_path / "sub" / ".." / "scan.png", tmp_path / "link.png"):
+    for target in (src, tmp_path / "sub" / ".." / "scan.png", tmp_path / "link.png", tmp_path / "hard.png"):
         for extra in ([], ["--overwrite"]):
             code, out, err = _run(capfd, "restore", src, "-o", target, *extra)
             assert code == 2 and "--in-place" in _one_line(err), (target, extra)
@@ -258,6 +259,10 @@ def _bad_cases(tmp: Path) -> list[tuple[str, list, int, str]]:
         ("no command", [], 2, "command"),
         ("negative workers", ["restore", tmp / "d", "-o", tmp / "o", "--workers", "-1"], 2, "workers"),
         ("confidence suffix", ["restore", good, *o, "--confidence", tmp / "c.npy"], 2, "confidence"),
+        ("confidence is the output", ["restore", good, *o, "--confidence", tmp / "out.png"], 2, "confidence"),
+        ("confidence is the input", ["restore", good, *o, "--confidence", good, "--in-place"], 2, "good.png"),
+        ("overwrite and skip", ["restore", good, *o, "--overwrite", "--skip-existing"], 2, "--overwrite"),
+        ("in-place and skip", ["restore", good, "--in-place", "--skip-existing"], 2, "--skip-existing"),
     ]
 
 

@@ -163,42 +163,53 @@ def _pair_folders(depth_dir: Path, rgb_dir: Path | None) -> tuple[list[Path], li
     return depths, ordered
 
 
-def _same_file(a: Path, b: Path) -> bool:
-    try:
-        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
-    except OSError:
-        return False
+def _identity(p: Path):
+    """What makes two paths the same file (symlinks, hard links, ``a/../b``): its device and inode; None if absent."""
+    # abspath folds "new/../b" into "b": the kernel cannot resolve it while "new" is missing, but will once the
+    # output's folders are created
+    for q in (p, Path(os.path.abspath(p))):
+        try:
+            st = q.stat()
+        except OSError:
+            continue
+        return st.st_dev, st.st_ino
+    return None
 
 
 def _check_targets(jobs: list[Job], args) -> list[Job]:
     """Refuse outputs that would replace an input or an existing file; mark those that --skip-existing skips."""
-    depths = [j.depth for j in jobs]
-    colours = [j.rgb for j in jobs if j.rgb is not None]
-    planned, existing = [], []
+    depth_ids = {_identity(j.depth): j.depth for j in jobs}
+    colour_ids = {_identity(j.rgb) for j in jobs if j.rgb is not None}
+    existing, checked_folders, seen = [], set(), set()
     for job in jobs:
-        outputs = [job.target] + ([job.confidence] if job.confidence else [])
-        for out in outputs:
-            if any(_same_file(out, c) for c in colours):
+        for out in [job.target] + ([job.confidence] if job.confidence else []):
+            name = os.path.normcase(os.path.abspath(out))
+            if name in seen:
+                raise UsageError(f"'{out}' would be written twice (as a depth map and a confidence map); give "
+                                 "--confidence another name")
+            seen.add(name)
+            out_id = _identity(out)
+            if out_id is not None and out_id in colour_ids:
                 raise UsageError(f"the output '{out}' is a colour input; choose another output (colour is never "
                                  "replaced, not even with --in-place)")
-            replaces_depth = [d for d in depths if _same_file(out, d)]
-            if replaces_depth and not (args.in_place and out is job.target and replaces_depth == [job.depth]):
-                raise UsageError(f"the output '{out}' would replace the input '{replaces_depth[0]}'; add --in-place "
-                                 "to replace the input with its restored map, or choose another output")
+            replaced = depth_ids.get(out_id) if out_id is not None else None
+            if replaced is not None and not (args.in_place and out is job.target and replaced == job.depth):
+                raise UsageError(f"the output '{out}' would replace the input '{replaced}'; add --in-place to "
+                                 "replace the input with its restored map, or choose another output")
             if out.is_dir():
                 raise UsageError(f"the output '{out}' is a folder; choose a file name")
-            if out.exists() and not replaces_depth and not args.overwrite:
+            if out_id is not None and replaced is None and not args.overwrite:
                 existing.append((job, out))
-            _check_writable(out)
-    skipped = {id(j) for j, out in existing if args.skip_existing and out == j.target}
+            if out.parent not in checked_folders:
+                _check_writable(out)
+                checked_folders.add(out.parent)
     # a confidence map left by an interrupted run is made again with its depth map
-    refused = [out for j, out in existing if not args.skip_existing]
+    skipped = {id(j) for j, out in existing if args.skip_existing and out is j.target}
+    refused = [out for _, out in existing if not args.skip_existing]
     if refused:
         raise UsageError(f"{_files(refused)} already exist{'s' if len(refused) == 1 else ''}; add --overwrite to "
                          "replace, or --skip-existing to keep what exists and restore the rest (nothing was written)")
-    for job in jobs:
-        planned.append(Job(job.depth, job.rgb, job.target, job.confidence, skip=id(job) in skipped))
-    return planned
+    return [Job(j.depth, j.rgb, j.target, j.confidence, skip=id(j) in skipped) for j in jobs]
 
 
 def _files(paths: list[Path]) -> str:
