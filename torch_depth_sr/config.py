@@ -66,7 +66,15 @@ class RestorerConfig:
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
     singular_rounds: int = 3
+    # a measured pixel with at least this many measured 8-neighbours within singular_support_tol noise σ of its
+    # value lies on a surface, not in the air: it stays trusted whatever its matched blocks say (0 = off; the
+    # paper's test). Edges of clean maps match no block well and failed the test (issue 12).
+    singular_support: int = 3
+    singular_support_tol: float = 3.0
     singular_gate: float = 0.002  # a sample whose share of gross failures is below this keeps Q = measured (0 = off)
+    # do no harm: trusted measured pixels end within c·σ_excess of their measurement, σ_excess the noise beyond
+    # quantisation (0 on a clean map), c = fidelity_band (0 = off); see fidelity.py
+    fidelity_band: float = 4.0
     # linear solves
     cg_tol: float = 1e-3
     cg_max_iter: int = 50

@@ -31,7 +31,7 @@ from .config import RestorerConfig
 from .nonlocal_prior import nonlocal_gradient
 from .operators import grad, grad_adjoint, laplacian
 from .shrinkage import group_soft_threshold, soft_threshold
-from .singular import detect_singular
+from .singular import detect_singular, neighbour_support
 from .solvers.dct import NeumannPreconditioner
 from .solvers.implicit import cg_solve
 
@@ -82,6 +82,7 @@ class RestorationContext:
     temperature: torch.Tensor  # scalar, positive
     color_weight: torch.Tensor  # scalar, positive
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
+    grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
 
     def K(self, x):
         return x if self.factor == 1 else F.avg_pool2d(x, self.factor)
@@ -173,6 +174,14 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
     with torch.no_grad():
         q, conf = detect_singular(ctx.y, x.detach(), ctx.observed, matches, sigma_floor=c.singular_sigma_floor,
                                   tau=c.singular_tau, rounds=c.singular_rounds, return_confidence=True)
+        if c.singular_support > 0:
+            # y is in units of the scale, which is the noise σ̂ unless a floor of the scale policy took over
+            tol = torch.as_tensor(c.singular_support_tol, dtype=ctx.y.dtype, device=ctx.y.device)
+            if ctx.grid_step is not None:  # neighbours one grid step apart lie on the same surface (slanted, clean)
+                tol = torch.maximum(tol, 1.01 * ctx.grid_step.to(ctx.y))
+            supported = neighbour_support(ctx.y, ctx.observed, tol) >= c.singular_support
+            q = torch.where(supported, ctx.observed.to(q.dtype), q)
+            conf = torch.where(supported, torch.maximum(conf, torch.full_like(conf, c.singular_tau)), conf)
         if c.singular_gate > 0:
             # Gate per sample: gross failures (|y − μ| > 2σ_i, i.e. P < e⁻², at least 5 noise σ off) are
             # practically impossible under Gaussian noise; if their share stays below the gate, the sample

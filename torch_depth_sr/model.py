@@ -22,10 +22,11 @@ from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import ABLATIONS, PRESETS, RestorerConfig, load_config_file
 from .errors import DepthSRError, ModelFileError, ShapeError
+from .fidelity import clamp_to_measurements, noise_band
 from .fill import fill_holes
 from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, singular_test, stage
 from .nonlocal_prior import nonlocal_gradient
-from .noise import depth_scale
+from .noise import depth_scale, implausible, quantisation_step
 from .operators import grad
 
 
@@ -111,25 +112,37 @@ class DepthRestorer(nn.Module):
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
                              f"{bs}x{bs}, the block size used by block matching.")
-        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b))
+        step = quantisation_step(y, observed, integer_input=_is_integer_dtype(layout.dtype))
+        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
+        glitches = implausible(y, observed, scale)
+        if bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
+            observed = torch.where(glitches, torch.zeros_like(observed), observed)
+            step = quantisation_step(y, observed, integer_input=_is_integer_dtype(layout.dtype))
+            offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
         o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
         yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
         grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
         t0 = time.perf_counter()
         with torch.set_grad_enabled(grad_needed):
             state, ctx = self._initial_state(yn, observed, guide, factor)
+            ctx.grid_step = step / scale
             for layer in self.layers:
                 state = layer(state, ctx)
         if state.x.device.type == "cuda":
             torch.cuda.synchronize(state.x.device)
         state.timings["total"] = time.perf_counter() - t0
-        x = state.x * s4 + o4
+        x = state.x
+        if factor == 1 and self.config.fidelity_band > 0:
+            band = noise_band(step / scale, sigma / scale, self.config.fidelity_band)  # in units of the scale
+            x = clamp_to_measurements(x, yn, state.q * observed, band)
+        x = x * s4 + o4
         if fill == "trusted":
             x = _leave_unconfident_missing(x, ctx, observed, factor, layout)
         out = restore_layout(x, layout)
         if not return_details:
             return out
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
+                "implausible_pixels": glitches.flatten(1).sum(1).tolist(),
                 "cg_iterations": state.cg_iterations, "factor": factor, "seconds": dict(state.timings)}
         conf, trusted, outliers = (map_layout(t, layout)
                                    for t in (state.confidence * observed, state.q, state.e * s4))
@@ -300,6 +313,17 @@ def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig) -> 
     return joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), **c.upsample_jbu)
 
 
+def _is_integer_dtype(dtype) -> bool:
+    """Whether a numpy or torch dtype holds integers (their grid step, 1, floors the noise estimate)."""
+    if dtype is None:
+        return False
+    if isinstance(dtype, torch.dtype):
+        return not (dtype.is_floating_point or dtype.is_complex or dtype == torch.bool)
+    import numpy as np
+
+    return np.dtype(dtype).kind in "iu"
+
+
 def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:
     scale_factor = check_scale_factor(scale_factor)
     h, w = y.shape[-2:]
@@ -355,6 +379,7 @@ def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig
     """
     return DepthRestorer(config, **overrides)(depth, rgb, mask=mask, noise_sigma=noise_sigma,
                                                scale_factor=scale_factor, return_details=return_details, fill=fill)
+
 
 _NOT_A_STATE_DICT = "not a torch_depth_sr state dict"
 

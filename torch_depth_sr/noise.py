@@ -15,6 +15,11 @@ The noise level is the robust (MAD) standard deviation of second differences
 second differences cancel planar slopes, and the median ignores depth edges,
 flying pixels and impulses. For a Gaussian noise of std σ, the second difference has
 std :math:`\sqrt 6\,σ`.
+
+**Quantisation floor.** Depth stored as integers (8-bit disparity, 16-bit millimetres) carries at
+least the rounding error of its grid, uniform on ±step/2, i.e. a std of step/√12. On clean integer
+maps more than half of the second differences are exactly 0, so the MAD is 0; the estimate is
+therefore floored at step/√12 (:func:`quantisation_step` finds the step).
 """
 from __future__ import annotations
 
@@ -50,13 +55,82 @@ def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor) -> torch.T
     return out
 
 
-def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma=None, relative_floor: float = 1e-3):
+def quantisation_step(depth: torch.Tensor, observed: torch.Tensor, integer_input: bool = False) -> torch.Tensor:
+    """Per-sample grid step ``(B,)`` of the measured values; 0 where they lie on no grid.
+
+    Integer input has step 1 (the value grid of its dtype) or the coarser grid its values lie on (so that
+    ``1000 · y`` gets step 1000 and the scale policy stays equivariant). Any input is taken to be on a grid only
+    when it repeats values (fewer distinct values than a quarter of the measured pixels, which noisy
+    float data never does) and every value is, to 1e-4 of the step, a multiple of the smallest gap
+    between distinct values.
+
+    Examples:
+        >>> y = torch.tensor([[[[2., 4., 4., 6., 6., 6., 8., 8.]]]])
+        >>> quantisation_step(y, torch.ones_like(y))
+        tensor([2.])
+    """
+    b = depth.shape[0]
+    out = depth.new_zeros(b)
+    for i in range(b):
+        vals = depth[i][observed[i] > 0].detach().double()
+        out[i] = _grid_step(vals, 1.0 if integer_input and vals.numel() else 0.0)
+    return out
+
+
+def _percentiles(vals: torch.Tensor) -> torch.Tensor:
+    """p1 and p99 of a 1-D tensor in its own dtype (float32 would overflow at 1e200 or flush 1e-300 to 0)."""
+    dt = torch.float64 if vals.dtype == torch.float64 else torch.float32
+    sub = vals if vals.numel() < 16_000_000 else vals[:: max(1, vals.numel() // 1_000_000)]
+    return torch.quantile(sub.to(dt), torch.tensor([0.01, 0.99], dtype=dt, device=vals.device)).to(vals.dtype)
+
+
+def implausible(depth: torch.Tensor, observed: torch.Tensor, scale: torch.Tensor, margin: float = 100.0
+                ) -> torch.Tensor:
+    """Measured pixels ``(B,1,H,W)`` bool that lie far outside every surface of their sample.
+
+    A value beyond ``[p1 − r − margin·scale, p99 + r + margin·scale]`` (``r = p99 − p1`` of the measured
+    depth, ``scale`` the noise level of the scale policy) is no surface but a glitch of the sensor or the
+    file (one pixel of 1e10 among disparities). Such a pixel is treated as not measured: the restorer
+    fills it like a hole and its confidence is 0, and one pixel can no longer overflow the arithmetic.
+
+    Examples:
+        >>> y = torch.full((1, 1, 8, 8), 100.0); y[0, 0, 3, 3] = 1e10
+        >>> implausible(y, torch.ones_like(y), torch.tensor([1.0])).sum().item()
+        1
+    """
+    out = torch.zeros_like(observed, dtype=torch.bool)
+    for i in range(depth.shape[0]):
+        m = observed[i] > 0
+        vals = depth[i][m].detach()
+        if vals.numel() < 2:
+            continue
+        p1, p99 = _percentiles(vals)
+        r = p99 - p1
+        lo, hi = p1 - r - margin * scale[i], p99 + r + margin * scale[i]
+        out[i] = m & ((depth[i] < lo) | (depth[i] > hi))
+    return out
+
+
+def _grid_step(vals: torch.Tensor, default: float) -> float:
+    uniq = torch.unique(vals)
+    if uniq.numel() < 2 or uniq.numel() > vals.numel() // 4:
+        return default
+    step = float((uniq[1:] - uniq[:-1]).min())
+    ratio = uniq / step
+    if float((ratio - ratio.round()).abs().max()) < 1e-4 and float(ratio.abs().max()) < 2**40:
+        return step
+    return default
+
+
+def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma=None, relative_floor: float = 1e-3,
+                step: torch.Tensor | None = None):
     """Return ``(offset (B,), scale (B,), sigma (B,))`` of the scale policy.
 
     ``scale = max(sigma, relative_floor · (p99 − p1 of measured depth), 1e-6 · |offset|)``:
     the floors only matter for noise-free or constant inputs, and all terms are
     proportional to the depth unit, so the policy stays scale-equivariant.
-    ``noise_sigma`` (float or ``(B,)``, in depth units) overrides the estimate.
+    ``noise_sigma`` (float or ``(B,)``, in depth units) overrides the estimate; otherwise the estimate
+    is floored at ``step/√12``, the rounding noise of a quantised grid (``step (B,)``, 0 = none).
     """
     b = depth.shape[0]
     offset = depth.new_zeros(b)
@@ -65,11 +139,12 @@ def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma=None, r
         vals = depth[i][observed[i] > 0].detach()
         offset[i] = vals.median()
         if vals.numel() > 1:
-            q = torch.quantile(vals.float() if vals.numel() < 16_000_000 else vals[:: max(1, vals.numel() // 1_000_000)].float(),
-                               torch.tensor([0.01, 0.99], device=vals.device)).to(depth.dtype)
+            q = _percentiles(vals)
             spread[i] = q[1] - q[0]
     if noise_sigma is None:
         sigma = estimate_noise_sigma(depth, observed)
+        if step is not None:
+            sigma = torch.maximum(sigma, step.to(sigma) / 12**0.5)
     else:
         sigma = torch.as_tensor(noise_sigma, dtype=depth.dtype, device=depth.device).expand(b).clone()
     scale = torch.maximum(sigma, relative_floor * spread)

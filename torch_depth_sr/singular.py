@@ -31,7 +31,7 @@ from ._checks import check_4d, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError, ShapeError
 
-__all__ = ["detect_singular"]
+__all__ = ["detect_singular", "neighbour_support"]
 
 
 def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
@@ -44,6 +44,38 @@ def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
     if bool((~torch.isfinite(v) | (v <= 0)).any()):
         raise DepthSRError(f"{name} must be finite and > 0; got {v.tolist()}.")
     return v.view(b, 1, 1, 1)
+
+
+def neighbour_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torch.Tensor]) -> torch.Tensor:
+    """Number of measured 8-neighbours whose value lies within ``tol`` of each pixel's, ``(B,1,H,W)``.
+
+    A pixel on a surface, even right at a depth edge, has neighbours on its own side that agree with it;
+    flying pixels and impulses float alone. ``tol`` is a float or a ``(B,)`` tensor in ``y``'s units.
+
+    Examples:
+        >>> y = torch.full((1, 1, 5, 5), 10.0); y[0, 0, 2, 2] = 50.0  # an impulse on a plane
+        >>> s = neighbour_support(y, torch.ones_like(y), 1.0)
+        >>> int(s[0, 0, 2, 2]), int(s[0, 0, 0, 0]), int(s[0, 0, 1, 1])
+        (0, 3, 7)
+    """
+    check_4d(y, "y", channels=1)
+    check_same_hw(y, observed, "y", "observed")
+    b = y.shape[0]
+    tol_t = torch.as_tensor(tol, dtype=y.dtype, device=y.device).reshape(-1)
+    tol_t = tol_t.expand(b).view(b, 1, 1, 1) if tol_t.numel() == 1 else tol_t.view(b, 1, 1, 1)
+    obs = (observed > 0) & torch.isfinite(y)
+    yv = torch.where(obs, y, torch.zeros_like(y))
+    h, w = y.shape[-2:]
+    yp = torch.nn.functional.pad(yv, (1, 1, 1, 1))
+    op = torch.nn.functional.pad(obs, (1, 1, 1, 1))
+    count = torch.zeros_like(yv)
+    for dy in (0, 1, 2):
+        for dx in (0, 1, 2):
+            if dy == 1 and dx == 1:
+                continue
+            near = op[..., dy:dy + h, dx:dx + w] & ((yp[..., dy:dy + h, dx:dx + w] - yv).abs() <= tol_t)
+            count = count + near.to(yv.dtype)
+    return count * obs
 
 
 def _detect_singular_c(y0, obs, xv, matches: BlockMatches, floor, tau: float, rounds: int
