@@ -278,8 +278,12 @@ def _check_device(name) -> None:
                              f"use cuda:0 to cuda:{torch.cuda.device_count() - 1}")
     elif dev.type == "mps" and not torch.backends.mps.is_available():
         raise UsageError(f"--device {name}: MPS is not available here; use --device cpu")
-    elif dev.type not in ("cpu", "cuda", "mps"):
-        raise UsageError(f"--device {name}: this command runs on cpu, cuda or mps")
+    elif dev.type == "meta":
+        raise UsageError(f"--device {name}: the meta device holds no data; use cpu or cuda")
+    elif dev.type not in ("cpu", "cuda", "mps"):  # xpu and the like: ask torch's module of that name
+        backend = getattr(torch, dev.type, None)
+        if backend is not None and hasattr(backend, "is_available") and not backend.is_available():
+            raise UsageError(f"--device {name}: {dev.type} is not available here; use --device cpu")
 
 
 if __name__ == "__main__":
