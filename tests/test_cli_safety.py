@@ -30,7 +30,8 @@ def _depth(dtype, seed=0) -> np.ndarray:
 
 
 def _write_pfm(path: Path, a: np.ndarray) -> None:
-    path.write_bytes(f"Pf\n{a.shape[1]} {a.shape[0]}\n-1\n".encode() + np.ascontiguousarray(a[::-1]).astype("<f4").tobytes())
+    header = f"Pf\n{a.shape[1]} {a.shape[0]}\n-1\n".encode()
+    path.write_bytes(header + np.ascontiguousarray(a[::-1]).astype("<f4").tobytes())
 
 
 def _read_pfm(path: Path) -> np.ndarray:

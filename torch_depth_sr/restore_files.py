@@ -131,7 +131,8 @@ def _confidence_path(arg: Optional[str], depth: Path, folder: bool) -> Optional[
 
 def _plan_folder(depth_dir: Path, rgb_dir: Optional[Path], args) -> list[Job]:
     if rgb_dir is not None and not rgb_dir.is_dir():
-        raise UsageError(f"depth '{depth_dir}' is a folder, so the colour must be a folder too; got the file '{rgb_dir}'")
+        raise UsageError(f"depth '{depth_dir}' is a folder, so the colour must be a folder too; got the file "
+                         f"'{rgb_dir}'")
     out = depth_dir if args.output is None else Path(args.output)
     if out.exists() and not out.is_dir():
         raise UsageError(f"-o '{out}' is a file; a folder of depth maps needs an output folder")
