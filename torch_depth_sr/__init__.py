@@ -5,7 +5,7 @@ half-quadratic splitting; see ``DepthRestorer`` and ``restore_depth``.
 """
 from .block_matching import BlockMatches, block_match, block_match_reference
 from .config import RestorerConfig
-from .errors import DepthSRError, DTypeError, InvalidDepthError, ShapeError
+from .errors import DepthSRError, DTypeError, InvalidDepthError, ModelFileError, ParameterError, ShapeError
 from .fill import fill_holes
 from .model import DepthRestorer, RestorationResult, restore_depth
 from .noise import estimate_noise_sigma
@@ -18,6 +18,8 @@ __all__ = [
     "DepthRestorer",
     "DepthSRError",
     "InvalidDepthError",
+    "ModelFileError",
+    "ParameterError",
     "RestorationResult",
     "RestorerConfig",
     "ShapeError",
