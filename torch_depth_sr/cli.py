@@ -241,22 +241,7 @@ def main(argv=None) -> int:
         return 2 if isinstance(e, UsageError) else 1
 
 
-def describe_error(e: BaseException) -> str:
-    """One line for an exception: the library's message, or the OS's with the file, or the type and message."""
-    from .errors import DepthSRError
-
-    if isinstance(e, DepthSRError):
-        text = str(e)
-    elif isinstance(e, OSError) and e.strerror:
-        where = f" '{e.filename}'" if e.filename else ""
-        text = f"{e.strerror}:{where}" if where else e.strerror
-    else:
-        text = f"{type(e).__name__}: {e} (unexpected; rerun with --debug for the traceback)"
-    return _single_line(text)
-
-
-def _single_line(text: str) -> str:
-    return " ".join(str(text).split())
+from .errors import describe_error, single_line as _single_line  # noqa: E402  (one home: errors.py)
 
 
 def _check_device(name) -> None:

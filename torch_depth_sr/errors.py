@@ -64,5 +64,22 @@ class UsageError(DepthSRError):
     """
 
 
-__all__ = ["DTypeError", "DepthSRError", "InvalidDepthError", "ModelFileError", "ParameterError", "ShapeError",
+def describe_error(e: BaseException) -> str:
+    """One line for an exception: the library's message, or the OS's with the file, or the type and message."""
+    if isinstance(e, DepthSRError):
+        text = str(e)
+    elif isinstance(e, OSError) and e.strerror:
+        where = f" '{e.filename}'" if e.filename else ""
+        text = f"{e.strerror}:{where}" if where else e.strerror
+    else:
+        text = f"{type(e).__name__}: {e} (unexpected; rerun with --debug for the traceback)"
+    return single_line(text)
+
+
+def single_line(text) -> str:
+    """``text`` with every run of whitespace, newlines included, folded to one space."""
+    return " ".join(str(text).split())
+
+
+__all__ = ["DTypeError", "describe_error", "single_line", "DepthSRError", "InvalidDepthError", "ModelFileError", "ParameterError", "ShapeError",
            "UsageError"]

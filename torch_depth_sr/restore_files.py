@@ -276,7 +276,7 @@ def _restore_single(model, job: Job, args) -> int:
 
 
 def _restore_folder(model, jobs: list[Job], args) -> int:
-    from .cli import describe_error
+    from .errors import describe_error
 
     todo = [j for j in jobs if not j.skip]
     loader = DataLoader(DepthFilePairs(todo), batch_size=None, num_workers=args.workers, collate_fn=_keep)
