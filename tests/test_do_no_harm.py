@@ -108,3 +108,44 @@ def test_clean_middlebury_crop_comes_back_unchanged():
     noisy[depth == 0] = 0
     m = depth > 0
     assert _rmse(restore_depth(noisy, rgb), depth, m) < _rmse(noisy, depth, m)
+
+
+def _bicubic_protocol(gt: torch.Tensor, s: int):
+    """The guided-SR protocol: antialiased bicubic downsampling (= Pillow's), bicubic interpolation back."""
+    h, w = gt.shape[-2] // s * s, gt.shape[-1] // s * s
+    gt = gt[..., :h, :w]
+    lr = torch.nn.functional.interpolate(gt, size=(h // s, w // s), mode="bicubic", antialias=True,
+                                         align_corners=False)
+    return gt, lr, torch.nn.functional.interpolate(lr, scale_factor=s, mode="bicubic", align_corners=False)
+
+
+def test_clean_synthetic_upsampling_is_not_worse_than_bicubic():
+    for seed in (0, 1):
+        s = make_scene(96, 128, seed=seed)
+        gt, lr, bicubic = _bicubic_protocol(s["gt"][None], 4)
+        out = restore_depth(lr, s["rgb"][None])
+        assert float((out - gt).square().mean().sqrt()) <= float((bicubic - gt).square().mean().sqrt())
+
+
+def test_clean_middlebury_upsampling_is_not_worse_than_bicubic():
+    """×4 on five 2006 images of the guided-SR test set (the fitting split). Before: 2.386 vs bicubic 1.865.
+
+    Not every image: on Cloth1's fine ripples the model stays 16 % behind bicubic (README), so the
+    test bounds the mean and the worst image.
+    """
+    import cv2
+
+    root = require_data_root("guided_dsr_testsets_dctnet") / "guided_dsr_testsets_dctnet" / "Middlebury"
+    ratios, ours, theirs = [], [], []
+    for i in ("03", "09", "12", "19", "28"):  # Baby1, Cloth1, Cloth4, Midd1, Wood1
+        gt = cv2.imread(str(root / "Depth" / f"Middlebury_{i}_output_depth.png"), cv2.IMREAD_UNCHANGED)
+        rgb = cv2.imread(str(root / "RGB" / f"Middlebury_{i}_output_color.png"))[..., ::-1]
+        gt, lr, bicubic = _bicubic_protocol(torch.from_numpy(gt.astype(np.float32))[None, None], 4)
+        h, w = gt.shape[-2:]
+        guide = torch.from_numpy(np.ascontiguousarray(rgb[:h, :w])).permute(2, 0, 1)[None].float() / 255
+        out = restore_depth(lr, guide)
+        ours.append(float((out.clamp(0, 255) - gt).square().mean().sqrt()))
+        theirs.append(float((bicubic.clamp(0, 255) - gt).square().mean().sqrt()))
+        ratios.append(ours[-1] / theirs[-1])
+    assert np.mean(ours) <= 1.01 * np.mean(theirs), (ours, theirs)
+    assert max(ratios) < 1.25, (ours, theirs)

@@ -44,6 +44,11 @@ class RestorerConfig:
     # guided upsampling: x⁰ by joint bilateral upsampling ("jbu") or "bicubic"; the TV weight λ is divided by
     # the factor s (TV of an s-times finer grid grows like s for the same surface; the quadratic terms do not)
     upsample_init: str = "jbu"
+    # guided upsampling: the degradation K that made the low-resolution input: "area" (averaging, as in the noisy
+    # Middlebury sets) or "bicubic" (antialiased bicubic resize, the protocol of the deep guided-SR networks)
+    degradation: str = "area"
+    # the JBU x⁰ may leave bicubic interpolation by at most this many noise σ (0 = unbounded JBU)
+    upsample_init_band: float = 3.0
     upsample_jbu: dict = field(default_factory=lambda: {"radius": 2, "sigma_space": 1.0, "sigma_color": 0.1})
     upsample_tv_per_factor: bool = True
     # guided upsampling: multipliers on the layer parameters named here (λ, η, γ, μ₁, μ₂). The data term
@@ -250,6 +255,8 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "init_kernel_size": _int(1),
     "init_sigma_space": _positive, "init_sigma_color": _positive,
     "upsample_init": _choice("jbu", "bicubic"),
+    "degradation": _choice("area", "bicubic"),
+    "upsample_init_band": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,
     "upsample_scale": _upsample_scale,

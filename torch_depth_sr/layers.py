@@ -29,7 +29,7 @@ from torch import nn
 from .block_matching import BlockMatches, block_match
 from .config import RestorerConfig
 from .nonlocal_prior import nonlocal_gradient
-from .operators import grad, grad_adjoint, laplacian
+from .operators import LinearOperator, grad, grad_adjoint, laplacian
 from .shrinkage import group_soft_threshold, soft_threshold
 from .singular import detect_singular, neighbour_support
 from .solvers.dct import NeumannPreconditioner
@@ -84,12 +84,18 @@ class RestorationContext:
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
     grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
 
+    degradation: Optional[LinearOperator] = None  # K when factor > 1 (None: area averaging)
+
     def K(self, x):
-        return x if self.factor == 1 else F.avg_pool2d(x, self.factor)
+        if self.factor == 1:
+            return x
+        return F.avg_pool2d(x, self.factor) if self.degradation is None else self.degradation(x)
 
     def Kt(self, v):
         if self.factor == 1:
             return v
+        if self.degradation is not None:
+            return self.degradation.adjoint(v)
         s = self.factor
         return F.interpolate(v, scale_factor=s, mode="nearest") / (s * s)
 
