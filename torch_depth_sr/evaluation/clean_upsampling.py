@@ -8,7 +8,8 @@ worse than bicubic.
 
 Protocol (``../shared/docs/benchmark.md``, track ``gdsr``, grey-level sets only): crop to a multiple of the
 scale, antialiased bicubic downsampling (torch's, which reproduces Pillow's), optional Gaussian noise of
-``noise`` on a 0–255 scale of the image's range, RMSE over all pixels after clipping to [0, 255]. This is a
+``noise`` on a 0–255 scale of the image's range, RMSE over all pixels after clipping to [0, 255]. Input
+values at or below 0 (bicubic overshoot, noise) are missing for the model, as in ``bench``. This is a
 check of the frozen model, not the ``gdsr`` benchmark track of issue 14 (no NYU/RGB-D-D, no deep networks).
 """
 from __future__ import annotations
@@ -42,7 +43,10 @@ def images(root: Path, dataset: str, only: list[str] | None = None):
             continue
         depth = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
         depth = (depth[..., 0] if depth.ndim == 3 else depth).astype(np.float32)
-        rgb = cv2.imread(str(folder / "RGB" / p.name.replace("_depth", "_color")))[..., ::-1]
+        colour = sorted((folder / "RGB").glob(f"{p.name.split('_')[0]}_{index}_*"))  # Lu's files say "ouput"
+        if len(colour) != 1:
+            raise FileNotFoundError(f"expected one colour image for {p.name} in {folder / 'RGB'}; found {colour}")
+        rgb = cv2.imread(str(colour[0]))[..., ::-1]
         yield f"{dataset}_{index}", depth, np.ascontiguousarray(rgb)
 
 
@@ -81,7 +85,9 @@ def main(argv=None) -> int:
             h, w = gt.shape[-2:]
             guide = torch.from_numpy(rgb[:h, :w].copy()).permute(2, 0, 1)[None].float() / 255
             with torch.no_grad():
-                errs = [rmse_grey(bicubic, gt)] + [rmse_grey(m(lr, guide), gt) for m in models]
+                # the bicubic overshoot can make dark-edge inputs negative: missing for the model (as in `bench`)
+                lr_model = torch.where(lr > 0, lr, torch.full_like(lr, float("nan")))
+                errs = [rmse_grey(bicubic, gt)] + [rmse_grey(m(lr_model, guide), gt) for m in models]
             held_out = not (dataset == "Middlebury" and name.split("_")[1] in FITTING)
             rows.append((name, held_out, errs))
             print(f"{name:16s} " + "  ".join(f"{e:7.3f}" for e in errs), flush=True)
