@@ -67,6 +67,11 @@ class RestorerConfig:
     temperature: float = 0.5  # h: weight temperature
     include_self: bool = False
     match_layers: tuple = (2, 5)  # layers that redo block matching on the current x (it always runs once on x⁰)
+    # nonlocal value prior (beyond the paper, which uses the matches for gradients only): η₃/2‖x − x̄‖² where x̄ is
+    # the weighted mean of the matched centres' values, on pixels whose matched values agree (weighted variance
+    # below nl_value_var σ̂²); 0 = off (issue 11)
+    nl_value_weight: float = 10.0
+    nl_value_var: float = 0.25
     # singular pixel detection
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
@@ -151,8 +156,8 @@ def _json_kind(v: Any) -> str:
 ABLATIONS = {
     # without the singular detector every measurement would count as trusted, flying pixels included, so the
     # fidelity band (an extension that relies on the detector) is off in these two ablations
-    "tv": dict(use_nonlocal=False, use_outliers=False, use_singular=False, fidelity_band=0.0),
-    "tv+nl": dict(use_nonlocal=True, use_outliers=False, use_singular=False, fidelity_band=0.0),
+    "tv": dict(use_nonlocal=False, use_outliers=False, use_singular=False, fidelity_band=0.0, nl_value_weight=0.0),
+    "tv+nl": dict(use_nonlocal=True, use_outliers=False, use_singular=False, fidelity_band=0.0, nl_value_weight=0.0),
     "full": dict(use_nonlocal=True, use_outliers=True, use_singular=True),
 }
 
@@ -256,6 +261,8 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "init_sigma_space": _positive, "init_sigma_color": _positive,
     "upsample_init": _choice("jbu", "bicubic"),
     "degradation": _choice("area", "bicubic"),
+    "nl_value_weight": _real(0.0, lo_open=False),
+    "nl_value_var": _real(0.0),
     "upsample_init_band": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,

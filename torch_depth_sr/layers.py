@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .block_matching import BlockMatches, block_match
+from .block_matching import BlockMatches, block_match, gather_neighbors
 from .config import RestorerConfig
 from .nonlocal_prior import nonlocal_gradient
 from .operators import LinearOperator, grad, grad_adjoint, laplacian
@@ -166,8 +166,13 @@ class UnrolledLayer(nn.Module):
             rhs = rhs + prior_weight(ctx, q) * ctx.prior
         if c.use_nonlocal:
             rhs = rhs + mu2 * grad_adjoint(w + alpha)
+        diag = None
+        if c.nl_value_weight > 0 and ctx.factor == 1 and matches is not None:
+            diag, target = nonlocal_value_prior(s.x, matches._replace(weight=match_weights(matches, ctx)),
+                                                c.nl_value_weight, c.nl_value_var)
+            rhs = rhs + diag * target
         with stage(s.timings, "cg", dev):
-            x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations)
+            x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations, diag=diag)
         return replace(s, x=x, z=z, w=w, e=e, alpha=alpha, q=q, confidence=conf, matches=matches)
 
     def extra_repr(self) -> str:
@@ -207,8 +212,22 @@ def prior_weight(ctx: RestorationContext, q: torch.Tensor) -> torch.Tensor:
     return c.guided_prior * untrusted
 
 
+def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float):
+    """``(W, x̄)``: the weighted mean x̄ of the matched centres' values and a weight map W = η₃ where they agree.
+
+    The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal estimate
+    of the depth itself, as in nonlocal means; it is trusted only where the matched values agree (weighted
+    variance below ``max_var`` noise σ², the units of ``x``), since where the centres straddle an edge their
+    mean would blur it. Adds η₃/2 ‖x − x̄‖² on those pixels to the x-subproblem.
+    """
+    xj = gather_neighbors(x, matches.index)[:, 0]  # (B, k, H, W)
+    xbar = (matches.weight * xj).sum(1, keepdim=True)
+    var = (matches.weight * (xj - xbar) ** 2).sum(1, keepdim=True)
+    return weight * (var.detach() < max_var).to(x.dtype), xbar
+
+
 def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
-            log: list) -> torch.Tensor:
+            log: list, diag: Optional[torch.Tensor] = None) -> torch.Tensor:
     """Solve (KᵀQK + β(1−Q) + μ DᵀD) x = rhs by preconditioned CG, warm-started at ``x0``.
 
     β(1−Q) is the weak pull of untrusted (missing or singular) pixels to the colour-guided estimate
@@ -218,6 +237,8 @@ def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: tor
     q = q.detach()
 
     beta = prior_weight(ctx, q) if ctx.prior is not None else None
+    if diag is not None:  # the nonlocal value prior's weights: one more diagonal term
+        beta = diag if beta is None else beta + diag
 
     def apply_a(v, mu_=mu):
         av = ctx.Kt(q * ctx.K(v)) + mu_ * laplacian(v)
