@@ -72,6 +72,7 @@ class RestorerConfig:
     # below nl_value_var σ̂²); 0 = off (issue 11)
     nl_value_weight: float = 10.0
     nl_value_var: float = 0.25
+    nl_value_offset: float = 2.5  # ... and whose weighted centroid lies within this many pixels (unbiased on slopes)
     # singular pixel detection
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
@@ -263,6 +264,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "degradation": _choice("area", "bicubic"),
     "nl_value_weight": _real(0.0, lo_open=False),
     "nl_value_var": _real(0.0),
+    "nl_value_offset": _real(0.0),
     "upsample_init_band": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,

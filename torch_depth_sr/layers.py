@@ -169,7 +169,7 @@ class UnrolledLayer(nn.Module):
         diag = None
         if c.nl_value_weight > 0 and ctx.factor == 1 and matches is not None:
             diag, target = nonlocal_value_prior(s.x, matches._replace(weight=match_weights(matches, ctx)),
-                                                c.nl_value_weight, c.nl_value_var)
+                                                c.nl_value_weight, c.nl_value_var, c.nl_value_offset)
             rhs = rhs + diag * target
         with stage(s.timings, "cg", dev):
             x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations, diag=diag)
@@ -212,7 +212,8 @@ def prior_weight(ctx: RestorationContext, q: torch.Tensor) -> torch.Tensor:
     return c.guided_prior * untrusted
 
 
-def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float):
+def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float,
+                         max_offset: float = 2.5):
     """``(W, x̄)``: the weighted mean x̄ of the matched centres' values and a weight map W = η₃ where they agree.
 
     The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal estimate
@@ -221,9 +222,20 @@ def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, 
     mean would blur it. Adds η₃/2 ‖x − x̄‖² on those pixels to the x-subproblem.
     """
     xj = gather_neighbors(x, matches.index)[:, 0]  # (B, k, H, W)
-    xbar = (matches.weight * xj).sum(1, keepdim=True)
-    var = (matches.weight * (xj - xbar) ** 2).sum(1, keepdim=True)
-    return weight * (var.detach() < max_var).to(x.dtype), xbar
+    w = matches.weight
+    xbar = (w * xj).sum(1, keepdim=True)
+    var = (w * (xj - xbar) ** 2).sum(1, keepdim=True)
+    # the weighted centroid of the matched centres must sit on the pixel: then x̄ is unbiased on any plane
+    # (Σ w (x_i + g·d) = x_i when Σ w d = 0); one-sided match sets (image borders, slopes) would bias it
+    h, wd = x.shape[-2:]
+    idx = matches.index
+    rows = torch.arange(h, device=x.device, dtype=x.dtype).view(1, 1, h, 1)
+    cols = torch.arange(wd, device=x.device, dtype=x.dtype).view(1, 1, 1, wd)
+    dy = (w * (torch.div(idx, wd, rounding_mode="floor").to(x.dtype) - rows)).sum(1, keepdim=True)
+    dx = (w * ((idx % wd).to(x.dtype) - cols)).sum(1, keepdim=True)
+    centred = dy.square() + dx.square() <= max_offset ** 2
+    agree = (var.detach() < max_var) & centred.detach()
+    return weight * agree.to(x.dtype), xbar
 
 
 def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
