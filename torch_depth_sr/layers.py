@@ -214,27 +214,28 @@ def prior_weight(ctx: RestorationContext, q: torch.Tensor) -> torch.Tensor:
 
 def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float,
                          max_offset: float = 2.5):
-    """``(W, x̄)``: the weighted mean x̄ of the matched centres' values and a weight map W = η₃ where they agree.
+    """``(W, x̄)``: a nonlocal estimate x̄ of each pixel's value from its matched centres, and a weight map.
 
-    The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal estimate
-    of the depth itself, as in nonlocal means; it is trusted only where the matched values agree (weighted
-    variance below ``max_var`` noise σ², the units of ``x``), since where the centres straddle an edge their
-    mean would blur it. Adds η₃/2 ‖x − x̄‖² on those pixels to the x-subproblem.
+    The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal-means
+    estimate of the depth itself, trusted (W = η₃) only where the centres' values agree (weighted variance
+    below ``max_var`` noise σ², the units of ``x``) and their weighted centroid lies within ``max_offset``
+    pixels: where the centres straddle an edge x̄ would blur it, and where they all lie on one side (image
+    borders) it is biased on any slope (Σ w (x_i + g·d) = x_i only when Σ w d = 0). Carrying each centre along
+    the nonlocal gradient α instead was tried and blurred edges (α is large there). Adds η₃/2 ‖x − x̄‖² on
+    those pixels to the x-subproblem.
     """
-    xj = gather_neighbors(x, matches.index)[:, 0]  # (B, k, H, W)
     w = matches.weight
-    xbar = (w * xj).sum(1, keepdim=True)
-    var = (w * (xj - xbar) ** 2).sum(1, keepdim=True)
-    # the weighted centroid of the matched centres must sit on the pixel: then x̄ is unbiased on any plane
-    # (Σ w (x_i + g·d) = x_i when Σ w d = 0); one-sided match sets (image borders, slopes) would bias it
-    h, wd = x.shape[-2:]
     idx = matches.index
+    h, wd = x.shape[-2:]
     rows = torch.arange(h, device=x.device, dtype=x.dtype).view(1, 1, h, 1)
     cols = torch.arange(wd, device=x.device, dtype=x.dtype).view(1, 1, 1, wd)
-    dy = (w * (torch.div(idx, wd, rounding_mode="floor").to(x.dtype) - rows)).sum(1, keepdim=True)
-    dx = (w * ((idx % wd).to(x.dtype) - cols)).sum(1, keepdim=True)
-    centred = dy.square() + dx.square() <= max_offset ** 2
-    agree = (var.detach() < max_var) & centred.detach()
+    oy = torch.div(idx, wd, rounding_mode="floor").to(x.dtype) - rows  # (B, k, H, W) offsets of the centres
+    ox = (idx % wd).to(x.dtype) - cols
+    xj = gather_neighbors(x, idx)[:, 0]  # (B, k, H, W)
+    xbar = (w * xj).sum(1, keepdim=True)
+    var = (w * (xj - xbar) ** 2).sum(1, keepdim=True)
+    centroid = (w * oy).sum(1, keepdim=True).square() + (w * ox).sum(1, keepdim=True).square()
+    agree = (var.detach() < max_var) & (centroid.detach() <= max_offset ** 2)
     return weight * agree.to(x.dtype), xbar
 
 
