@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from torch_depth_sr.cli import main
@@ -409,11 +409,15 @@ _NAME = st.text(string.ascii_letters + string.digits + " _-.é", min_size=1, max
     lambda s: s.strip(".") != "" and not s.startswith("-"))
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+# derandomize: CI runs the same 30 examples every time (a new failure is found by running with more examples)
+@settings(max_examples=30, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(kind=st.sampled_from(_KINDS), name=_NAME, out_ext=st.sampled_from([None, ".png", ".npy", ".pfm", ".tiff",
                                                                           ".txt", ".jpg", "same-file"]),
        damage=st.sampled_from([None, None, None, "truncate", "flip", "garbage", "empty", "zeros"]),
        seed=st.integers(0, 2**16), with_rgb=st.booleans(), exists=st.booleans())
+# found by this test in CI: big-endian float32 NPY written as PFM (float32, little-endian by the format)
+@example(kind="npy-f4be", name="0", out_ext=".pfm", damage=None, seed=0, with_rgb=False, exists=False)
 def test_property_restore_never_loses_data(capfd, kind, name, out_ext, damage, seed, with_rgb, exists):
     dtype = np.dtype(_DTYPE[kind])
     with tempfile.TemporaryDirectory() as tmp:
@@ -451,7 +455,9 @@ def test_property_restore_never_loses_data(capfd, kind, name, out_ext, damage, s
             assert not exists, "an existing output was replaced without --overwrite"
             written = _written(stdout)
             r = _read(written)
-            assert r.dtype == dtype and r.shape == a.shape
+            # NPY keeps the byte order too; PFM/PNG/TIFF store their own (a big-endian float32 is still float32)
+            same = r.dtype == dtype if written.suffix == ".npy" else r.dtype == np.dtype(dtype).newbyteorder("=")
+            assert same and r.shape == a.shape, (r.dtype, dtype, written.suffix)
         else:
             assert code in (1, 2)
             _one_line(err)
