@@ -441,3 +441,25 @@ def test_jbf_in_row_bands_equals_the_whole_image(monkeypatch, budget, shape, ker
     monkeypatch.setattr(jbf_module, "_band_budget", lambda device: budget)
     banded = jbf_module.joint_bilateral_filter(depth, rgb, kernel_size=kernel, sigma_space=3.0, sigma_color=0.1)
     assert torch.equal(banded, whole)
+
+
+def test_rolling_guidance_filter_denoises_and_keeps_edges():
+    from torch_depth_sr.baselines import rolling_guidance_filter
+
+    g = torch.Generator().manual_seed(0)
+    gt = torch.full((1, 1, 48, 64), 40.0)
+    gt[..., 32:] = 120.0
+    noisy = gt + 5 * torch.randn(gt.shape, generator=g)
+    mask = torch.ones_like(gt)
+    mask[0, 0, 10:14, 10:14] = 0  # a hole, filled first
+    out = rolling_guidance_filter(noisy * mask, mask)
+    assert float((out - gt).square().mean().sqrt()) < 0.5 * float((noisy - gt).square().mean().sqrt())
+    assert float((out[..., 30] - 40).abs().max()) < 5 and float((out[..., 33] - 120).abs().max()) < 5
+
+
+def test_rgf_is_a_benchmark_method():
+    from torch_depth_sr.evaluation.methods import run_method
+
+    g = torch.Generator().manual_seed(1)
+    sample = {"depth": 50 + torch.randn(1, 32, 40, generator=g), "rgb": torch.rand(3, 32, 40, generator=g)}
+    assert run_method("rgf", sample).shape == (1, 1, 32, 40)

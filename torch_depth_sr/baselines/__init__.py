@@ -1,4 +1,4 @@
-"""Classical baselines: joint bilateral filter/upsampling, sparse-coding denoising, bicubic."""
+"""Classical baselines: joint bilateral filter/upsampling, rolling guidance filter, sparse-coding denoising, bicubic."""
 from .bicubic import BicubicUpsample, bicubic_upsample
 from .dictionary import (
     DictionaryDenoise,
@@ -9,6 +9,7 @@ from .dictionary import (
     overcomplete_dct_dictionary,
 )
 from .jbf import JointBilateralFilter, JointBilateralUpsample, joint_bilateral_filter, joint_bilateral_upsample
+from .rgf import rolling_guidance_filter
 
 __all__ = [
     "BicubicUpsample",
@@ -23,4 +24,5 @@ __all__ = [
     "joint_bilateral_filter",
     "joint_bilateral_upsample",
     "overcomplete_dct_dictionary",
+    "rolling_guidance_filter",
 ]
