@@ -100,7 +100,7 @@ def run_bench(args) -> int:
         preds = {}
         for m in methods:
             t0 = time.perf_counter()
-            pred = run_method(m, sample, args.device, config).cpu()
+            pred = run_method(m, sample, args.device, config, track=args.track).cpu()
             secs = time.perf_counter() - t0
             preds[m] = pred
             row = {"track": args.track, "scene": rec.name, "dataset": rec.dataset, "method": m,
