@@ -65,7 +65,7 @@ def quantisation_step(depth: torch.Tensor, observed: torch.Tensor, integer_input
     between distinct values.
 
     Examples:
-        >>> y = torch.tensor([[[[2., 4., 4., 6., 6., 6., 8., 8.]]]])
+        >>> y = torch.tensor([2., 4., 6., 8.]).repeat(4).view(1, 1, 2, 8)  # 16 values on a grid of 2
         >>> quantisation_step(y, torch.ones_like(y))
         tensor([2.])
     """
