@@ -162,3 +162,20 @@ def test_example_quickstart():
     r = subprocess.run([sys.executable, str(ROOT / "examples" / "quickstart.py")], capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0 and "restored RMSE" in r.stdout, r.stderr[-2000:]
+
+
+def test_every_parameter_that_requires_grad_gets_a_finite_gradient():
+    """Issue 10 item 3: the parameters that learn are exactly the ones that get gradients."""
+    from torch_depth_sr import DepthRestorer
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(40, 48, seed=2)
+    g = torch.Generator().manual_seed(0)
+    y = (s["gt"] + 3 * torch.randn(s["gt"].shape, generator=g)).clamp_min(1)[None]
+    model = DepthRestorer(trainable=True, num_layers=3)
+    loss = (model(y, s["rgb"][None]) - s["gt"][None]).square().mean()
+    loss.backward()
+    trainable = {n for n, p in model.named_parameters() if p.requires_grad}
+    with_grad = {n for n, p in model.named_parameters() if p.grad is not None and torch.isfinite(p.grad).all()}
+    assert trainable == with_grad, sorted(trainable ^ with_grad)
+    assert "log_color_weight" not in trainable and "log_temperature" in trainable

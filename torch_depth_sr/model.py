@@ -51,7 +51,8 @@ class DepthRestorer(nn.Module):
 
     Frozen (``trainable=False``, the default) it is the paper's algorithm as a fixed
     preprocessing stage and no parameter requires grad. Trainable, every layer's λ, η, γ, μ₁, μ₂,
-    the block-matching temperature ``h`` and colour weight ``ρ`` receive gradients.
+    the block-matching temperature ``h`` receive gradients (the colour weight ``ρ`` only picks the matches,
+    a discrete choice, so it is a fixed buffer).
 
     Args:
         config: a :class:`RestorerConfig` (defaults: the tuned frozen parameters).
@@ -75,8 +76,9 @@ class DepthRestorer(nn.Module):
         self.config = config
         self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
         self.log_temperature = nn.Parameter(torch.tensor(config.temperature).log(), requires_grad=trainable)
-        self.log_color_weight = nn.Parameter(torch.tensor(max(config.color_weight, 1e-8)).log(),
-                                             requires_grad=trainable)
+        # ρ weighs colour in the block distance, which picks the matches: a discrete choice with no gradient, so
+        # ρ is a buffer, not a parameter (same state-dict key as before, so saved models still load)
+        self.register_buffer("log_color_weight", torch.tensor(max(config.color_weight, 1e-8)).log())
 
     @classmethod
     def ablation(cls, name: str, **overrides) -> "DepthRestorer":
