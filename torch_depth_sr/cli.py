@@ -9,46 +9,7 @@ from pathlib import Path
 
 import torch
 
-
-def _metadata(device: str = "cpu") -> dict:
-    import datetime
-    import platform
-    import subprocess
-
-    try:
-        commit = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=5,
-                                cwd=Path(__file__).parent).stdout.strip() or None
-    except Exception:  # git missing or not a checkout
-        commit = None
-    import kornia
-
-    return {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "commit": commit,
-            "torch": torch.__version__, "kornia": kornia.__version__, "python": platform.python_version(),
-            "device": device, "threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine(),
-            **_gpu_metadata(device)}
-
-
-def _gpu_metadata(device: str) -> dict:
-    if not str(device).startswith("cuda") or not torch.cuda.is_available():
-        return {}
-    props = torch.cuda.get_device_properties(torch.device(device))
-    return {"gpu": props.name, "gpu_memory_gb": round(props.total_memory / 2**30, 1), "cuda": torch.version.cuda}
-
-
-def _print_table(rows: list[dict], cols: list[str], title: str = "") -> None:
-    if title:
-        print(title)
-    widths = {c: max(len(c), *(len(_fmt(r.get(c))) for r in rows)) for c in cols}
-    print("  ".join(c.ljust(widths[c]) for c in cols))
-    print("  ".join("-" * widths[c] for c in cols))
-    for r in rows:
-        print("  ".join(_fmt(r.get(c)).ljust(widths[c]) for c in cols))
-
-
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return f"{v:.4f}" if abs(v) < 1000 else f"{v:.1f}"
-    return "" if v is None else str(v)
+from .evaluation.report import metadata as _metadata, print_table as _print_table
 
 
 def cmd_demo(args) -> int:
@@ -130,24 +91,23 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {v}")
-    return v
+def _whole_number(minimum: int):
+    """An argparse type: a whole number ``>= minimum``, with a one-line message otherwise."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {text!r}") from None
+        if v < minimum:
+            raise argparse.ArgumentTypeError(f"expected a whole number >= {minimum}, got {v}")
+        return v
+
+    return parse
 
 
-def _non_negative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {v}")
-    return v
+_positive_int = _whole_number(1)
+_non_negative_int = _whole_number(0)
 
 
 def _add_debug(p: argparse.ArgumentParser, default=False) -> None:

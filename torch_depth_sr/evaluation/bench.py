@@ -81,7 +81,7 @@ def _parse_config(text):
 
 def run_bench(args) -> int:
     from .._data_root import data_root
-    from ..cli import _metadata, _print_table
+    from .report import metadata as _metadata, print_table as _print_table
 
     if args.track == "speed":
         from .speed import run_speed

@@ -123,7 +123,7 @@ def profile(device: str, height: int, width: int, path: Path) -> dict:
 
 
 def main(argv=None) -> int:
-    from ..cli import _metadata, _print_table
+    from .report import metadata as _metadata, print_table as _print_table
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--device", default="cuda")

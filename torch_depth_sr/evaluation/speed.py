@@ -216,7 +216,7 @@ def _parse_ints(s: str):
 
 def run_speed(args) -> int:
     """Run the speed track; print a table; write ``{"metadata", "results"}`` JSON to ``args.json``."""
-    from ..cli import _metadata, _print_table
+    from .report import metadata as _metadata, print_table as _print_table
 
     device = getattr(args, "device", None) or "cpu"
     sizes = _option(args, "sizes", "TORCH_DEPTH_SR_SPEED_SIZES", SIZES, _parse_sizes)
