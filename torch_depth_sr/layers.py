@@ -83,6 +83,7 @@ class RestorationContext:
     color_weight: torch.Tensor  # scalar, positive
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
     grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
+    fill_confident: Optional[torch.Tensor] = None  # (B,1,h,w) {0,1}: measured, or a hole filled from a clear side
 
     degradation: Optional[LinearOperator] = None  # K when factor > 1 (None: area averaging)
 

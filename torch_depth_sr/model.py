@@ -295,16 +295,13 @@ def _check_fill(fill) -> None:
 
 def _leave_unconfident_missing(x, ctx, observed, factor: int, layout):
     """``fill="trusted"``: holes whose fill is not confident become 0 (integer output) or NaN (float)."""
-    ok = getattr(ctx, "fill_confident", None)
+    ok = ctx.fill_confident
     if ok is None:
         return x
     missing = (observed <= 0) & (ok <= 0)  # (B,1,h,w)
     if factor > 1:
         missing = F.interpolate(missing.to(x.dtype), scale_factor=factor, mode="nearest") > 0
-    dt = layout.dtype
-    integer = (not dt.is_floating_point) if isinstance(dt, torch.dtype) else (dt is not None and
-                                                                            __import__("numpy").dtype(dt).kind in "iub")
-    return x.masked_fill(missing, 0.0 if integer else float("nan"))
+    return x.masked_fill(missing, 0.0 if _is_integer_dtype(layout.dtype) else float("nan"))
 
 
 def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig,
