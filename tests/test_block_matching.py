@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import torch
 
-from torch_depth_sr.block_matching import (BlockMatches, _load_clib, block_match, block_match_reference,
-                                           gather_neighbors)
+from torch_depth_sr.block_matching import BlockMatches, block_match, block_match_reference, gather_neighbors
+from torch_depth_sr.block_matching.torch_search import _smallest_keys
 from torch_depth_sr.errors import DepthSRError, ShapeError
 
-BACKENDS = ["numpy", "torch"] + (["c"] if _load_clib() is not None else [])
+BACKENDS = ["numba", "torch"]
 
 
 def _inputs(b=2, h=11, w=14, dtype=torch.float32, rgb=True, trust=True, seed=0):
@@ -226,25 +226,113 @@ class TestGatherNeighbors:
             gather_neighbors(torch.rand(1, 1, 4, 4), torch.zeros(1, 2, 5, 4, dtype=torch.int64))
 
 
-def test_numpy_and_c_fallback_env(monkeypatch):
-    """The auto backend works whatever the C kernel's availability."""
-    import torch_depth_sr.block_matching as bm
+_CHILD_NO_NUMBA = """
+import sys, warnings
+sys.modules["numba"] = None  # as on an install where numba is missing or broken
+import torch
+from torch_depth_sr.block_matching import block_match, block_match_reference
+g = torch.Generator().manual_seed(0)
+d, rgb = torch.rand(1, 1, 24, 32, generator=g), torch.rand(1, 3, 24, 32, generator=g)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    a = block_match(d, rgb, None, block_size=3, search_window=7, k=4)
+    a = block_match(d, rgb, None, block_size=3, search_window=7, k=4)
+r = block_match_reference(d, rgb, None, block_size=3, search_window=7, k=4)
+assert torch.equal(a.index, r.index) and torch.allclose(a.dist, r.dist)
+print("warnings", len([w for w in caught if "falls back to the torch path" in str(w.message)]))
+"""
 
-    monkeypatch.setattr(bm, "_CLIB", None)
-    monkeypatch.setattr(bm, "_CLIB_TRIED", True)
-    x, c, t = _inputs(b=1)
-    a = block_match(x, c, t, block_size=3, search_window=7, k=5)
-    r = block_match_reference(x, c, t, block_size=3, search_window=7, k=5)
-    assert_same_matches(a, r, 1e-5)
-    assert np.isfinite(a.dist.numpy()).all()
+
+def test_without_numba_the_torch_path_runs_and_warns_once():
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _CHILD_NO_NUMBA], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "warnings 1" in out.stdout
+
+
+def test_numba_backend_required_is_an_error_without_numba(monkeypatch):
+    import torch_depth_sr.block_matching.native as native
+
+    monkeypatch.setattr(native, "_KERNELS", None)
+    monkeypatch.setattr(native, "_FAILED", "numba could not be imported (test)")
+    with pytest.raises(DepthSRError, match="numba CPU kernels are unavailable"):
+        block_match(torch.rand(1, 1, 12, 12), block_size=3, search_window=5, k=3, backend="numba")
+    m = block_match(torch.rand(1, 1, 12, 12), block_size=3, search_window=5, k=3)  # auto: the torch path
+    assert m.index.shape == (1, 3, 12, 12)
+
+
+class TestRefine:
+    """refine_matches: the exact top-k of the previous matches (and neighbours' and a lattice) re-ranked."""
+
+    kw = dict(block_size=3, search_window=9, k=5, color_weight=2.0)
+
+    @staticmethod
+    def _true_dist(x, c, t, index, rho):
+        """The block distance of every kept candidate, by explicit loops (replicate-padded 3×3 blocks)."""
+        xp = np.pad(x[0, 0].double().numpy(), 1, mode="edge")
+        tp = np.pad(t[0, 0].double().numpy(), 1, mode="edge")
+        cp = np.stack([np.pad(ch.double().numpy(), 1, mode="edge") for ch in c[0]])
+        _, k, h, w = index.shape
+        out = np.zeros((k, h, w))
+        for m in range(k):
+            for i in range(h):
+                for j in range(w):
+                    p, q = divmod(int(index[0, m, i, j]), w)
+                    tt = tp[i:i + 3, j:j + 3] * tp[p:p + 3, q:q + 3]
+                    num = (tt * (xp[i:i + 3, j:j + 3] - xp[p:p + 3, q:q + 3]) ** 2).sum()
+                    col = ((cp[:, i:i + 3, j:j + 3] - cp[:, p:p + 3, q:q + 3]) ** 2).mean()
+                    out[m, i, j] = num / max(1.0, tt.sum()) + rho * col
+        return torch.from_numpy(out)[None]
+
+    @pytest.mark.parametrize("trust", [False, True])
+    def test_same_image_gives_the_same_matches(self, trust):
+        from torch_depth_sr.block_matching import refine_matches
+
+        x, c, t = _inputs(b=2, h=16, w=19, trust=trust)
+        first = block_match(x, c, t, **self.kw)
+        again = refine_matches(x, first, c, t, **self.kw, reach=0)
+        assert torch.equal(again.index, first.index)
+        torch.testing.assert_close(again.dist, first.dist, rtol=1e-5, atol=1e-6)
+
+    @pytest.mark.parametrize("reach,lattice", [(0, 0), (1, 0), (0, 2), (1, 2)])
+    def test_rescored_candidates_are_ranked_exactly(self, reach, lattice):
+        """Every kept distance is the true block distance on the new image; the list is the best of the
+        candidates (never worse than the previous matches re-scored), and more candidates never hurt."""
+        from torch_depth_sr.block_matching import refine_matches
+
+        x, c, t = _inputs(b=1, h=15, w=18)
+        prev = block_match(x, c, t, **self.kw)
+        x2 = x + 0.5 * torch.randn(x.shape, generator=torch.Generator().manual_seed(3))
+        exact = block_match(x2, c, t, **self.kw)
+        got = refine_matches(x2, prev, c, t, **self.kw, reach=reach, lattice=lattice)
+        true_d = self._true_dist(x2, c, t, got.index, self.kw["color_weight"]).to(got.dist)
+        torch.testing.assert_close(got.dist, true_d, rtol=1e-4, atol=1e-5)
+        assert bool((got.dist[:, 1:] >= got.dist[:, :-1]).all())
+        rescored = refine_matches(x2, prev, c, t, **self.kw, reach=0)
+        assert bool((got.dist <= rescored.dist + 1e-5).all())  # a superset of candidates: never worse
+        assert bool((got.dist >= exact.dist - 1e-5).all())  # and never better than the exact search
+        srt = got.index.sort(dim=1).values
+        assert bool((srt[:, 1:] != srt[:, :-1]).all())  # no candidate kept twice
+
+    def test_errors(self):
+        from torch_depth_sr.block_matching import refine_matches
+
+        x, c, t = _inputs(b=1)
+        prev = block_match(x, c, t, **self.kw)
+        with pytest.raises(ShapeError, match="previous matches"):
+            refine_matches(x, prev, c, t, **{**self.kw, "k": 7})
+        with pytest.raises(DepthSRError, match="reach must be"):
+            refine_matches(x, prev, c, t, **self.kw, reach=-1)
+        with pytest.raises(DepthSRError, match="previous must be BlockMatches"):
+            refine_matches(x, prev.index, c, t, **self.kw)
 
 
 @pytest.mark.parametrize("how", ["topk", "split", "sort"])
 @pytest.mark.parametrize("n,k", [(441, 10), (121, 6), (17, 3)])
 def test_every_selection_of_the_torch_path_keeps_the_k_smallest(how, n, k):
     """The torch path's top-k choices (picked for GPU speed) select the same keys as a full sort."""
-    from torch_depth_sr.block_matching import _smallest_keys
-
     g = torch.Generator().manual_seed(n)
     keys = torch.randint(0, 2 ** 62, (2, 50, n), generator=g)
     keys[0, 0, :5] = torch.iinfo(torch.int64).max  # invalid candidates never win
@@ -253,7 +341,5 @@ def test_every_selection_of_the_torch_path_keeps_the_k_smallest(how, n, k):
 
 
 def test_unknown_selection_is_refused():
-    from torch_depth_sr.block_matching import _smallest_keys
-
     with pytest.raises(DepthSRError, match="selection must be one of"):
         _smallest_keys(torch.zeros(1, 2, 500, dtype=torch.int64), 3, "heap")

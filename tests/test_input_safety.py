@@ -225,44 +225,6 @@ def test_unknown_pretrained_name_still_errors():
         DepthRestorer.from_pretrained("nope")
 
 
-_CHILD_BM = """
-    import torch, warnings
-    from torch_depth_sr.block_matching import _load_clib, block_match
-    g = torch.Generator().manual_seed(0)
-    d, rgb = torch.rand(1, 1, 24, 32, generator=g), torch.rand(1, 3, 24, 32, generator=g)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        lib = _load_clib()
-        a = block_match(d, rgb, None, block_size=3, search_window=7, k=4, backend="auto")
-    b = block_match(d, rgb, None, block_size=3, search_window=7, k=4, backend="numpy")
-    assert torch.equal(a.index, b.index) and torch.allclose(a.dist, b.dist)
-    print("lib", lib is not None, "warnings", len([w for w in caught if "cached C kernel" in str(w.message)]))
-"""
-
-
-@pytest.mark.skipif(shutil.which("cc") is None and shutil.which("gcc") is None, reason="needs a C compiler")
-def test_truncated_native_cache_is_rebuilt(tmp_path):
-    env = {"TORCH_DEPTH_SR_CACHE": str(tmp_path), "TORCH_DEPTH_SR_NO_CEXT": "0"}
-    first = _run_child(_CHILD_BM, env)
-    assert first.returncode == 0, first.stderr
-    assert "lib True" in first.stdout
-    (lib_file,) = tmp_path.glob("bm_*.so")
-    size = lib_file.stat().st_size
-    with open(lib_file, "r+b") as f:  # truncate in place, as a killed writer or a full disk would
-        f.truncate(size // 5)
-    second = _run_child(_CHILD_BM, env)
-    assert second.returncode == 0, f"exit {second.returncode}: {second.stderr[-2000:]}"
-    assert "lib True warnings 0" in second.stdout  # rebuilt silently
-    assert lib_file.stat().st_size == size
-    # the cache is corrupt and cannot be rebuilt (no compiler): numpy is used, with one warning
-    with open(lib_file, "r+b") as f:
-        f.truncate(size // 5)
-    third = _run_child(_CHILD_BM, dict(env, CC="/bin/false"))
-    assert third.returncode == 0, f"exit {third.returncode}: {third.stderr[-2000:]}"
-    assert "lib False warnings 1" in third.stdout
-
-
-# ---- item 10: smaller ----------------------------------------------------------------------------
 @pytest.mark.parametrize("dtype", [">f4", ">f8", ">u2", ">i4"])
 def test_big_endian_depth_is_accepted(dtype):
     d = _depth().astype(dtype)

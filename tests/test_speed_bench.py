@@ -53,27 +53,6 @@ def test_unknown_method():
 # test_solvers.py; kept here because this session may only add this test file).
 
 
-@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_singular_kernel_equals_torch_path(monkeypatch, dtype):
-    from torch_depth_sr.block_matching import _load_clib, block_match
-    from torch_depth_sr.singular import detect_singular
-
-    if _load_clib() is None:
-        pytest.skip("no C compiler: only the torch path exists")
-    g = torch.Generator().manual_seed(0)
-    x = (torch.randn(2, 1, 30, 36, generator=g) * 3 + 50).to(dtype)
-    y = x + torch.randn(x.shape, generator=g, dtype=dtype)
-    y[0, 0, 10, 10] += 40.0
-    obs = (torch.rand(x.shape, generator=g) > 0.1).to(dtype)
-    m = block_match(x, None, None, block_size=5, search_window=9, k=6)
-    q_c, p_c = detect_singular(y, x, obs, m, sigma_floor=1.0, return_confidence=True)
-    monkeypatch.setenv("TORCH_DEPTH_SR_NO_CEXT", "1")
-    q_t, p_t = detect_singular(y, x, obs, m, sigma_floor=1.0, return_confidence=True)
-    torch.testing.assert_close(q_c, q_t)
-    torch.testing.assert_close(p_c, p_t, rtol=1e-5, atol=1e-5)
-    assert float(q_c[0, 0, 10, 10]) == 0.0
-
-
 @pytest.mark.parametrize("shape", [(1, 1, 70, 65), (2, 3, 64, 100), (1, 1, 9, 130)])
 def test_fft_dct_equals_matrix_dct(shape):
     from torch_depth_sr.solvers.dct import dct2, dct_matrix, idct2

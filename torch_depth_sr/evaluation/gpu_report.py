@@ -25,7 +25,7 @@ from pathlib import Path
 
 import torch
 
-from .. import block_matching
+from ..block_matching import torch_search
 from ..block_matching import block_match
 from ..model import DepthRestorer
 from . import speed
@@ -88,9 +88,9 @@ def selection_times(device: str, sizes, batches, repeats: int) -> list:
             keys = torch.randint(0, 2 ** 62, (b, h * w, n), device=device, generator=g)
             expected = torch.sort(keys, dim=2).values[..., :c.k]
             row = {"size": f"{w}x{h}", "batch": b}
-            for how in block_matching._SELECT_CHOICES:
-                same = torch.equal(block_matching._smallest_keys(keys, c.k, how), expected)
-                row[how] = _timed(lambda: block_matching._smallest_keys(keys, c.k, how), device, repeats)
+            for how in torch_search._SELECT_CHOICES:
+                same = torch.equal(torch_search._smallest_keys(keys, c.k, how), expected)
+                row[how] = _timed(lambda: torch_search._smallest_keys(keys, c.k, how), device, repeats)
                 row[how + "_exact"] = same
             rows.append(row)
             del keys, expected

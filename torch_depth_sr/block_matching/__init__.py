@@ -1,0 +1,163 @@
+"""Block matching: the ``k`` blocks most similar to the block around every pixel (paper eq. 2-4).
+
+For every pixel ``i`` the ``b×b`` block ``P_i`` around it is compared with the blocks ``P_j`` around
+every pixel ``j = i + o`` of an ``S×S`` search window (offsets ``o = (dy, dx)``, ``|dy|, |dx| ≤ S//2``):
+
+.. math::
+
+    d(i, j) = \\frac{\\sum_{p} t_i(p)\\, t_j(p)\\, (x_i(p) - x_j(p))^2}{\\max(1, \\sum_p t_i(p)\\, t_j(p))}
+              + \\rho \\, \\operatorname{mean}_{p, c}\\, (c_i(p) - c_j(p))^2
+
+where ``x`` is the depth, ``t`` the trust mask (1 = trusted) and ``c`` the colour guide. Both terms
+are means over the block, so the units are "per pixel". Block pixels outside the image are
+replicate-padded; candidate centres ``j`` outside the image are never selected. The ``k`` smallest
+distances are kept, sorted ascending; ties are broken by the smaller offset id
+``(dy + S//2)·S + (dx + S//2)`` (row-major over the window). The weights are
+``ω_ij = softmax_j(−d(i, j) / h)`` over the kept blocks.
+
+Layout of the package:
+
+* ``_common.py`` — the result type, argument checks, offset ids and weights;
+* ``reference.py`` — :func:`block_match_reference`, the unfold oracle (tests, small images);
+* ``cpu_exact.py`` — the exact search on the CPU, a numba kernel (running top-k over the window);
+* ``torch_search.py`` — the exact search on any device, in torch (GPU; CPU when numba is missing);
+* ``refine.py`` — :func:`refine_matches`, the fast approximate search: candidates from a previous set of
+  matches and from the neighbours' matches (PatchMatch propagation), re-ranked exactly;
+* ``native.py`` — the one loader of the compiled CPU kernels; warns once when it falls back to torch.
+
+Reference: Y. Yang et al., "depth maps restoration based on the sparse representation of nonlocal
+self-similarity" (the paper under ``shared/paper``), §II-B.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import torch
+
+from .._checks import check_4d
+from ..errors import DepthSRError, ShapeError
+from ._common import BlockMatches, Scalar, finish, prepare
+from .native import cpu_kernels
+from .reference import block_match_reference
+from .refine import refine_matches
+from .torch_search import block_match_torch
+
+__all__ = ["BlockMatches", "block_match", "block_match_reference", "refine_matches", "gather_neighbors"]
+
+BACKENDS = ("auto", "numba", "torch")
+
+
+def block_match(
+    depth: torch.Tensor,
+    rgb: Optional[torch.Tensor] = None,
+    trust: Optional[torch.Tensor] = None,
+    block_size: int = 5,
+    search_window: int = 21,
+    k: int = 10,
+    color_weight: Scalar = 1.0,
+    temperature: Scalar = 1.0,
+    include_self: bool = False,
+    chunk_rows: Optional[int] = None,
+    *,
+    search_stride: int = 1,
+    backend: str = "auto",
+) -> BlockMatches:
+    """The ``k`` most similar blocks to the block around every pixel: the exact search of the window.
+
+    .. math::
+
+        d(i, j) = \\frac{\\sum_p t_i(p) t_j(p) (x_i(p) - x_j(p))^2}{\\max(1, \\sum_p t_i(p) t_j(p))}
+                  + \\rho\\, \\operatorname{mean}_{p,c} (c_i(p) - c_j(p))^2,
+        \\qquad \\omega_{ij} = \\operatorname{softmax}_j(-d(i, j) / h)
+
+    Candidates ``j`` lie in the ``S×S`` search window around ``i`` and inside the image; block pixels
+    outside the image are replicate-padded. Computed without gradient; equal (to float round-off) to
+    :func:`block_match_reference`. Distances are computed in the input's precision.
+
+    Args:
+        depth: ``(B, 1, H, W)`` float depth (the current estimate; it should have no holes).
+        rgb: ``(B, C, H, W)`` colour guide (usually ``C = 3`` in ``[0, 1]``) or ``None`` (depth only).
+        trust: ``(B, 1, H, W)`` {0, 1} mask of trusted depth pixels, or ``None`` (all trusted).
+        block_size: odd block side ``b`` (5).
+        search_window: odd search window side ``S`` (21).
+        k: number of blocks kept (10); must not exceed the candidates at an image corner.
+        color_weight: ``ρ``, float or ``(B,)`` tensor (≥ 0).
+        temperature: ``h`` of the weights, float or ``(B,)`` tensor (> 0). A tensor requiring grad gets
+            a gradient through ``weight``.
+        include_self: keep the centre block ``j = i`` (distance 0) as a candidate.
+        chunk_rows: image rows per chunk (memory/speed trade-off); ``None`` picks a cache-friendly size.
+        search_stride: evaluate only offsets whose ``dy`` and ``dx`` are multiples of it (1 = the exact
+            full search, the default; 2 ≈ 3.6× fewer offsets for ``S = 21``).
+        backend: ``"auto"`` (the numba kernel on CPU, torch elsewhere), ``"numba"`` or ``"torch"``.
+
+    Returns:
+        :class:`BlockMatches` ``(dist, index, weight)``, each ``(B, k, H, W)``, sorted by ``dist``.
+
+    Raises:
+        ShapeError: wrong ndim/channels, mismatched sizes, image smaller than a block.
+        DepthSRError: even/invalid sizes, ``k`` larger than the candidates, negative weights.
+
+    Examples:
+        >>> depth = torch.rand(2, 1, 32, 40)
+        >>> rgb = torch.rand(2, 3, 32, 40)
+        >>> m = block_match(depth, rgb, None, block_size=5, search_window=11, k=6)
+        >>> m.dist.shape, m.index.dtype
+        (torch.Size([2, 6, 32, 40]), torch.int64)
+        >>> bool(torch.allclose(m.weight.sum(1), torch.ones(2, 32, 40)))
+        True
+        >>> neighbours = gather_neighbors(depth, m.index)  # (B, 1, k, H, W)
+    """
+    rho, temp = prepare(depth, rgb, trust, block_size, search_window, k, color_weight, temperature,
+                        include_self, search_stride)
+    if backend not in BACKENDS:
+        raise DepthSRError(f"backend must be one of {BACKENDS}; got {backend!r}.")
+    if chunk_rows is not None and (isinstance(chunk_rows, bool) or not isinstance(chunk_rows, int)
+                                   or chunk_rows < 1):
+        raise DepthSRError(f"chunk_rows must be None or an int >= 1; got {chunk_rows!r}.")
+    on_cpu = depth.device.type == "cpu"
+    kernels = cpu_kernels(required=backend == "numba") if on_cpu and backend != "torch" else None
+    if backend == "numba" and not on_cpu:
+        raise DepthSRError(f"backend='numba' runs on the CPU; depth is on {depth.device}. Use 'auto' or 'torch'.")
+    with torch.no_grad():
+        if trust is not None:
+            trust = trust.to(depth.dtype)
+        if rgb is not None:
+            rgb = rgb.to(depth.dtype)
+        args = (depth, rgb, trust, block_size, search_window, k, rho.detach(), include_self, chunk_rows,
+                search_stride)
+        if kernels is not None:
+            dist, index = kernels.block_match_cpu_exact(*args)
+        else:
+            dist, index = block_match_torch(*args)
+    return finish(dist.to(depth.device), index.to(depth.device), temp)
+
+
+def gather_neighbors(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """Values at the matched block centres: ``out[b, c, m, i, j] = values[b, c].flatten()[index[b, m, i, j]]``.
+
+    Args:
+        values: ``(B, C, H, W)`` tensor (differentiable).
+        index: ``(B, k, H, W)`` int64 flat indices from :class:`BlockMatches`.
+
+    Returns:
+        ``(B, C, k, H, W)`` tensor; gradients flow back to ``values``.
+
+    Examples:
+        >>> v = torch.arange(6.).view(1, 1, 2, 3)
+        >>> idx = torch.tensor([[[[5, 4, 3], [2, 1, 0]]]])
+        >>> gather_neighbors(v, idx)[0, 0, 0]
+        tensor([[5., 4., 3.],
+                [2., 1., 0.]])
+    """
+    check_4d(values, "values")
+    check_4d(index, "index")
+    if index.dtype != torch.int64:
+        raise DepthSRError(f"index must be int64 (from BlockMatches.index); got {index.dtype}.")
+    if index.shape[0] != values.shape[0] or index.shape[-2:] != values.shape[-2:]:
+        raise ShapeError(f"values {tuple(values.shape)} and index {tuple(index.shape)} must share batch size "
+                         f"and height/width.")
+    b, c, h, w = values.shape
+    k = index.shape[1]
+    flat = values.reshape(b, c, h * w)  # (B, C, HW)
+    idx = index.reshape(b, 1, k * h * w).expand(b, c, k * h * w)  # (B, C, k·HW)
+    return torch.gather(flat, 2, idx).view(b, c, k, h, w)  # (B, C, k, H, W)

@@ -1,0 +1,229 @@
+"""Exact block matching on the CPU: a numba kernel, compiled by LLVM at first use (no C compiler).
+
+Shift-and-box-filter with a running top-``k`` per pixel. For every offset ``o`` of the search window
+the squared differences of a band of image rows are summed over the block by a ring buffer of
+``b`` rows (column sums) and a sliding row sum, and each pixel's distance is offered to its sorted
+list of the ``k`` best. The distance is symmetric, ``d(p, p+o) = d(p+o, p)``, so only one offset of
+each mirrored pair is computed and offered to both pixels. Offsets are visited nearest first, so the
+``k``-th distance is tight early and few offers need an insertion. Keys compare as ``(distance, offset
+id)``: ties go to the smaller id whatever the visiting order, as in the unfold reference.
+
+Bands of rows run in parallel (``numba.prange``; threads: ``numba.set_num_threads``, which follows
+``torch.get_num_threads()`` here). The compiled code is cached on disk by numba (``cache=True``).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from numba import njit, prange
+
+from ._common import index_from_offsets, offset_order, symmetric_order
+
+__all__ = ["block_match_cpu_exact"]
+
+_ID_NONE = np.int32(0x7FFFFFFF)
+
+
+@njit(cache=True, inline="always")
+def _offer(d, oid, td, ti, j):
+    """Insert ``(d, oid)`` into the sorted list ``td[j], ti[j]`` of length k if it beats the last entry."""
+    k = td.shape[1]
+    if d > td[j, k - 1] or (d == td[j, k - 1] and oid >= ti[j, k - 1]):
+        return
+    m = k - 1
+    while m > 0 and (td[j, m - 1] > d or (td[j, m - 1] == d and ti[j, m - 1] > oid)):
+        td[j, m] = td[j, m - 1]
+        ti[j, m] = ti[j, m - 1]
+        m -= 1
+    td[j, m] = d
+    ti[j, m] = oid
+
+
+@njit(cache=True, error_model="numpy")
+def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded):
+    """Running top-k for image rows [h0, h1); ``topd/topi`` are (h1-h0, W, k) views of this band.
+
+    ``xp, tp`` (Hp, Wp) and ``cp`` (C, Hp, Wp): planes replicate-padded by r, then zero-padded by R.
+    ``consts`` = (ρ/C, ρ/(C·b²), 1/b²) in the planes' dtype, so that float32 stays float32 (SIMD width).
+    """
+    bs = 2 * r + 1
+    s = 2 * big_r + 1
+    u_len = big_w + 2 * r
+    nc = cp.shape[0]
+    cw, crho, inb = consts[0], consts[1], consts[2]
+    one = consts[3]
+    zero = consts[4]
+    nbuf = 3 if use_t else 1
+    ring = np.zeros((nbuf, bs, u_len), dtype=xp.dtype)  # depth (, trust product, colour) squared differences
+    col = np.zeros((nbuf, u_len), dtype=xp.dtype)
+    dd = np.zeros(big_w, dtype=xp.dtype)
+    k = topd.shape[2]
+    if not seeded:
+        topd[:] = np.inf
+        topi[:] = _ID_NONE
+    kth = np.empty((h1 - h0, big_w), dtype=xp.dtype)
+    for a in range(h1 - h0):
+        for j in range(big_w):
+            kth[a, j] = topd[a, j, k - 1]
+    for io in range(order.shape[0]):
+        oid = order[io]
+        dy = oid // s - big_r
+        dx = oid % s - big_r
+        mid = (big_r - dy) * s + (big_r - dx)
+        f0 = max(h0, -dy)
+        f1 = min(h1, big_h - dy)  # rows i of the band whose candidate row i+dy is inside
+        i0, i1 = f0, f1
+        m0, m1 = 0, 0  # rows i whose mirrored pixel (i+dy, j+dx) lies in the band
+        if both[io]:
+            m0 = max(h0 - dy, 0)
+            m1 = min(h1 - dy, big_h - dy)
+            if m1 > m0:
+                if f1 <= f0:
+                    i0, i1 = m0, m1
+                else:
+                    i0, i1 = min(i0, m0), max(i1, m1)
+        if i1 <= i0:
+            continue
+        j0 = -dx if dx < 0 else 0
+        j1 = big_w - dx if dx > 0 else big_w
+        for t in range(i0, i1 + 2 * r):
+            slot = t % bs
+            xa = xp[big_r + t, big_r:big_r + u_len]
+            xb = xp[big_r + t + dy, big_r + dx:big_r + dx + u_len]
+            e = ring[0, slot]
+            if use_t:
+                ta = tp[big_r + t, big_r:big_r + u_len]
+                tb = tp[big_r + t + dy, big_r + dx:big_r + dx + u_len]
+                et = ring[1, slot]
+                ec = ring[2, slot]
+                for u in range(u_len):
+                    tt = ta[u] * tb[u]
+                    df = xa[u] - xb[u]
+                    e[u] = tt * (df * df)
+                    et[u] = tt
+                    ec[u] = zero
+                for c in range(nc):
+                    ca = cp[c, big_r + t, big_r:big_r + u_len]
+                    cb = cp[c, big_r + t + dy, big_r + dx:big_r + dx + u_len]
+                    for u in range(u_len):
+                        dc = ca[u] - cb[u]
+                        ec[u] += dc * dc
+            else:
+                for u in range(u_len):
+                    df = xa[u] - xb[u]
+                    e[u] = df * df
+                for c in range(nc):
+                    ca = cp[c, big_r + t, big_r:big_r + u_len]
+                    cb = cp[c, big_r + t + dy, big_r + dx:big_r + dx + u_len]
+                    for u in range(u_len):
+                        dc = ca[u] - cb[u]
+                        e[u] += cw * (dc * dc)
+            if t < i0 + 2 * r:
+                continue
+            i = t - 2 * r
+            for bb in range(nbuf):
+                cs = col[bb]
+                rb0 = ring[bb, 0]
+                for u in range(u_len):
+                    cs[u] = rb0[u]
+                for s2 in range(1, bs):
+                    rbs = ring[bb, s2]
+                    for u in range(u_len):
+                        cs[u] += rbs[u]
+            c0 = col[0]
+            for j in range(j0, j1):
+                dd[j] = c0[j]
+            for q in range(1, bs):
+                for j in range(j0, j1):
+                    dd[j] += c0[j + q]
+            if use_t:
+                c1 = col[1]
+                c2 = col[2]
+                for j in range(j0, j1):
+                    s1 = c1[j]
+                    sc = c2[j]
+                    for q in range(1, bs):
+                        s1 += c1[j + q]
+                        sc += c2[j + q]
+                    dd[j] = dd[j] / max(s1, one) + crho * sc
+            else:
+                for j in range(j0, j1):
+                    dd[j] *= inb
+            for j in range(j0, j1):
+                if not dd[j] > zero:
+                    dd[j] = zero
+            # the k-th distance of every pixel lives in a contiguous row `kth`: the common case, a
+            # rejection, is one compare on contiguous memory; only a better candidate touches the lists
+            if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
+                row = i - h0
+                kr = kth[row]
+                for j in range(j0, j1):
+                    if dd[j] <= kr[j] and not (seeded and _listed(oid, topi[row], j)):
+                        _offer(dd[j], oid, topd[row], topi[row], j)
+                        kr[j] = topd[row, j, k - 1]
+            if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
+                row = i + dy - h0
+                kr = kth[row]
+                for j in range(j0, j1):
+                    if dd[j] <= kr[j + dx] and not (seeded and _listed(mid, topi[row], j + dx)):
+                        _offer(dd[j], mid, topd[row], topi[row], j + dx)
+                        kr[j + dx] = topd[row, j + dx, k - 1]
+
+
+@njit(cache=True, inline="always")
+def _listed(oid, ti, j):
+    """Whether offset ``oid`` is already in the list ``ti[j]`` (lists seeded with other candidates)."""
+    for m in range(ti.shape[1]):
+        if ti[j, m] == oid:
+            return True
+    return False
+
+
+@njit(cache=True, parallel=True)
+def _all_bands(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, samples, starts, ends, topd, topi,
+               seeded):
+    for n in prange(starts.shape[0]):
+        b, h0, h1 = samples[n], starts[n], ends[n]
+        _band(xp[b], tp[b], cp[b], use_t, big_h, big_w, r, big_r, order, both, consts[b], h0, h1,
+              topd[b, h0:h1], topi[b, h0:h1], seeded)
+
+
+def _pad(planes: torch.Tensor, r: int, big_r: int, dtype) -> np.ndarray:
+    """(B, C, H, W) → numpy (B, C, H+2r+2R, W+2r+2R): replicate by r, then zeros by R."""
+    p = torch.nn.functional.pad(planes.to(dtype), (r,) * 4, mode="replicate")
+    p = torch.nn.functional.pad(p, (big_r,) * 4)
+    return np.ascontiguousarray(p.cpu().numpy())
+
+
+def block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride,
+                          seed=None):
+    """Exact top-k block matches ``(dist, index)``, each (B, k, H, W), by the numba kernel.
+
+    ``seed = (topd, topi)`` (numpy (B, H, W, k), sorted, offset ids) starts the lists from those candidates
+    (e.g. re-scored previous matches) instead of empty; they are updated in place and returned.
+    """
+    bsz, _, h, w = depth.shape
+    r, big_r = block_size // 2, search_window // 2
+    dt = torch.float64 if depth.dtype == torch.float64 else torch.float32
+    xp = _pad(depth.detach(), r, big_r, dt)[:, 0]
+    use_t = trust is not None
+    tp = _pad(trust.detach(), r, big_r, dt)[:, 0] if use_t else np.zeros((bsz, 1, 1), xp.dtype)
+    cp = _pad(rgb.detach(), r, big_r, dt) if rgb is not None else np.zeros((bsz, 0, 1, 1), xp.dtype)
+    order, both = symmetric_order(offset_order(search_window, stride, include_self), search_window)
+    # taller bands share more of each mirrored pair's rows; at least one band per thread
+    rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads()))))
+    bands = [(b, h0, min(h, h0 + rows)) for b in range(bsz) for h0 in range(0, h, rows)]
+    samples, starts, ends = (np.array(v, dtype=np.int64) for v in zip(*bands))
+    if seed is None:
+        topd = np.empty((bsz, h, w, k), dtype=xp.dtype)
+        topi = np.empty((bsz, h, w, k), dtype=np.int32)
+    else:
+        topd, topi = seed
+    nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
+    consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
+                      dtype=xp.dtype)
+    _all_bands(xp, tp, cp, use_t, h, w, r, big_r, order, both, consts, samples, starts, ends, topd, topi,
+               seed is not None)
+    dist = torch.from_numpy(topd).permute(0, 3, 1, 2).to(depth.dtype).contiguous()
+    index = index_from_offsets(torch.from_numpy(topi).permute(0, 3, 1, 2), search_window, h, w)
+    return dist, index.contiguous()

@@ -1,0 +1,75 @@
+"""Fast approximate block matching from a previous set of matches (the re-matching layers of the model).
+
+The unrolled model matches blocks on x⁰ and again on later estimates of the same scene. Between two
+passes the estimate changes by a denoising step, and so do the matches, but mostly among blocks that
+were already good candidates for the pixel or for its neighbours. :func:`refine_matches` therefore
+re-ranks, exactly, only those candidates: the previous matches of the pixel and of its four neighbours
+at distance ``reach`` (taken at the same offset), about ``5k`` distances per pixel instead of ``S²``.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import torch
+
+from ..errors import DepthSRError, ShapeError
+from ._common import BlockMatches, Scalar, finish, prepare
+from .native import cpu_kernels
+
+__all__ = ["refine_matches"]
+
+
+def refine_matches(
+    depth: torch.Tensor,
+    previous: BlockMatches,
+    rgb: Optional[torch.Tensor] = None,
+    trust: Optional[torch.Tensor] = None,
+    block_size: int = 5,
+    search_window: int = 21,
+    k: int = 10,
+    color_weight: Scalar = 1.0,
+    temperature: Scalar = 1.0,
+    include_self: bool = False,
+    *,
+    reach: int = 1,
+    lattice: int = 0,
+) -> BlockMatches:
+    """The ``k`` best blocks among the previous matches of each pixel and of its neighbours.
+
+    Same distance, arguments and result as :func:`~torch_depth_sr.block_matching.block_match`; the
+    candidates are the offsets of ``previous`` at the pixel and at its 4 neighbours ``reach`` pixels
+    away (``reach = 0``: the pixel's own previous matches only), restricted to the search window. The
+    result is the exact top-``k`` of those candidates, so it is never worse than the previous matches
+    re-scored on ``depth``. On the CPU a numba kernel runs; elsewhere (or without numba) the exact
+    search runs instead (a GPU does it fast).
+
+    Examples:
+        >>> from torch_depth_sr.block_matching import block_match
+        >>> x, rgb = torch.rand(1, 1, 24, 32), torch.rand(1, 3, 24, 32)
+        >>> first = block_match(x, rgb, None, block_size=3, search_window=9, k=4)
+        >>> again = refine_matches(x, first, rgb, None, block_size=3, search_window=9, k=4)
+        >>> bool(torch.equal(again.index, first.index))  # same image: the same matches
+        True
+    """
+    rho, temp = prepare(depth, rgb, trust, block_size, search_window, k, color_weight, temperature,
+                        include_self, 1)
+    if not isinstance(previous, BlockMatches):
+        raise DepthSRError(f"previous must be BlockMatches (from block_match); got {type(previous).__name__}.")
+    if previous.index.shape[0] != depth.shape[0] or previous.index.shape[-2:] != depth.shape[-2:] \
+            or previous.index.shape[1] < k:
+        raise ShapeError(f"previous matches {tuple(previous.index.shape)} must be (B, >= k, H, W) for depth "
+                         f"{tuple(depth.shape)} and k={k}.")
+    if isinstance(reach, bool) or not isinstance(reach, int) or reach < 0:
+        raise DepthSRError(f"reach must be an int >= 0; got {reach!r}.")
+    kernels = cpu_kernels() if depth.device.type == "cpu" else None
+    with torch.no_grad():
+        trust = None if trust is None else trust.to(depth.dtype)
+        rgb = None if rgb is None else rgb.to(depth.dtype)
+        if kernels is None:
+            from . import block_match
+
+            return block_match(depth, rgb, trust, block_size, search_window, k, color_weight, temperature,
+                               include_self)
+        dist, index = kernels.refine_cpu(depth, rgb, trust, previous.index, block_size, search_window, k,
+                                         rho, include_self, reach, lattice)
+    return finish(dist, index, temp)

@@ -1,0 +1,123 @@
+"""Approximate block matching on the CPU (numba): re-rank a few candidates per pixel exactly.
+
+Candidates of pixel ``p`` are offsets ``o`` (so the block at ``p + o``): the offsets of ``p``'s own
+previous matches and those of its neighbours' previous matches (the coherence PatchMatch exploits:
+the neighbour of a good match is a good match for the neighbour). Each distinct candidate's distance
+is computed directly over the block (same formula as the exact search) and kept in a sorted top-k.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from numba import njit, prange
+
+from ._common import index_from_offsets
+from .cpu_exact import _ID_NONE, _listed, _offer, _pad, block_match_cpu_exact
+
+__all__ = ["refine_cpu"]
+
+
+@njit(cache=True, inline="always")
+def _block_distance(xp, tp, cp, use_t, ya, xa, yb, xb, bs, crho, nb):
+    """d(i, j) for blocks whose top-left corners are (ya, xa) and (yb, xb) in the padded planes."""
+    num = 0.0
+    cnt = 0.0
+    col = 0.0
+    nc = cp.shape[0]
+    for u in range(bs):
+        for v in range(bs):
+            df = xp[ya + u, xa + v] - xp[yb + u, xb + v]
+            if use_t:
+                tt = tp[ya + u, xa + v] * tp[yb + u, xb + v]
+                num += tt * df * df
+                cnt += tt
+            else:
+                num += df * df
+            for c in range(nc):
+                dc = cp[c, ya + u, xa + v] - cp[c, yb + u, xb + v]
+                col += dc * dc
+    d = num / max(cnt, 1.0) if use_t else num / nb
+    d += crho * col
+    return d if d > 0 else 0.0
+
+
+@njit(cache=True, parallel=True)
+def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, rho, topd, topi):
+    """prev: (B, H, W, kp) offset ids of the previous matches; reach: neighbour distance (0 = none)."""
+    bsz = xp.shape[0]
+    bs = 2 * r + 1
+    s = 2 * big_r + 1
+    nc = cp.shape[1]
+    nb = float(bs * bs)
+    kp = prev.shape[3]
+    centre = big_r * s + big_r
+    for n in prange(bsz * big_h):
+        b = n // big_h
+        i = n % big_h
+        crho = rho[b] / (nc * nb) if nc > 0 else 0.0
+        for j in range(big_w):
+            td = topd[b, i]
+            ti = topi[b, i]
+            td[j] = np.inf
+            ti[j] = _ID_NONE
+            for src in range(5 if reach > 0 else 1):
+                ni, nj = i, j
+                if src == 1:
+                    ni = i - reach
+                elif src == 2:
+                    ni = i + reach
+                elif src == 3:
+                    nj = j - reach
+                elif src == 4:
+                    nj = j + reach
+                if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
+                    continue
+                for m in range(kp):
+                    oid = prev[b, ni, nj, m]
+                    if oid == _ID_NONE or (oid == centre and not include_self):
+                        continue
+                    dy = oid // s - big_r
+                    dx = oid % s - big_r
+                    if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
+                        continue
+                    if _listed(oid, ti, j):
+                        continue
+                    d = _block_distance(xp[b], tp[b], cp[b], use_t, big_r + i, big_r + j,
+                                        big_r + i + dy, big_r + j + dx, bs, crho, nb)
+                    _offer(d, oid, td, ti, j)
+
+
+def offsets_of(index: torch.Tensor, search_window: int) -> torch.Tensor:
+    """Flat indices (B, k, H, W) of matched centres → offset ids ``(dy+R)·S + (dx+R)`` (B, H, W, k) int32."""
+    _, _, h, w = index.shape
+    big_r = search_window // 2
+    rows = torch.arange(h, device=index.device).view(1, 1, h, 1)
+    cols = torch.arange(w, device=index.device).view(1, 1, 1, w)
+    dy = torch.div(index, w, rounding_mode="floor") - rows
+    dx = index % w - cols
+    oid = (dy + big_r) * search_window + dx + big_r
+    return oid.permute(0, 2, 3, 1).to(torch.int32).contiguous()
+
+
+def refine_cpu(depth, rgb, trust, previous_index, block_size, search_window, k, rho, include_self, reach, lattice):
+    """Top-k ``(dist, index)`` among the previous matches of each pixel and of its 4 neighbours at ``reach``,
+    and (``lattice > 0``) the offsets of the search window on a lattice of that step."""
+    bsz, _, h, w = depth.shape
+    r, big_r = block_size // 2, search_window // 2
+    dt = torch.float64 if depth.dtype == torch.float64 else torch.float32
+    # the direct distance needs only the block halo r: pad by r (replicate) then R (zeros) like the exact kernel
+    xp = _pad(depth.detach(), r, big_r, dt)[:, 0]
+    use_t = trust is not None
+    tp = _pad(trust.detach(), r, big_r, dt)[:, 0] if use_t else np.zeros((bsz, 1, 1), xp.dtype)
+    cp = _pad(rgb.detach(), r, big_r, dt) if rgb is not None else np.zeros((bsz, 0, 1, 1), xp.dtype)
+    prev = offsets_of(previous_index.cpu(), search_window).numpy()
+    topd = np.empty((bsz, h, w, k), dtype=xp.dtype)
+    topi = np.empty((bsz, h, w, k), dtype=np.int32)
+    rho_np = np.asarray(rho.detach().cpu().double().numpy(), dtype=np.float64)
+    _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), rho_np, topd, topi)
+    if lattice > 0:
+        block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, None, lattice,
+                              seed=(topd, topi))
+    dist = torch.from_numpy(topd).permute(0, 3, 1, 2).to(depth.dtype).contiguous()
+    index = index_from_offsets(torch.from_numpy(topi).permute(0, 3, 1, 2), search_window, h, w)
+    return dist, index.contiguous()
