@@ -40,7 +40,10 @@ from typing import Optional
 
 import torch
 
-METHODS = ("full", "full-fast", "jbf", "dictionary", "kornia-jbf9")
+METHODS = ("full", "full-fast", "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
+# stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
+# one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
+# "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240) once and reports its frames/s.
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
 DEFAULT_SKIP = ("full@1088x1376x8", "full-fast@1088x1376x8", "dictionary@1088x1376x8")
@@ -88,6 +91,8 @@ def _make_runner(method: str, device: str):
             return r.depth, r.info
 
         return run
+    if method in ("bm-exact", "bm-refine", "x0-filter"):
+        return _stage_runner(method)
     if method == "jbf":
         from ..baselines import joint_bilateral_filter
 
@@ -101,6 +106,57 @@ def _make_runner(method: str, device: str):
 
         return lambda y, rgb: (kornia.filters.joint_bilateral_blur(y, rgb, (9, 9), 0.1, (3.0, 3.0)), None)
     raise ValueError(f"unknown speed method {method!r}; allowed are {list(METHODS)}.")
+
+
+def _stage_runner(method: str):
+    """One stage of the model alone, on normalised inputs as the model builds them (default config)."""
+    from ..block_matching import block_match, refine_matches
+    from ..fill import fill_holes
+    from ..model import DepthRestorer, initial_estimate
+
+    model = DepthRestorer()
+    c = model.config
+    kw = dict(block_size=c.block_size, search_window=c.search_window, k=c.k,
+              color_weight=float(model.log_color_weight.exp()), temperature=float(model.log_temperature.exp()))
+    cache: dict = {}
+
+    def normalised(y):
+        observed = (y > 0).to(y.dtype)
+        yn = y / 5.0  # the inputs' noise σ is 5: the model's units
+        return yn, observed
+
+    def run(y, rgb):
+        yn, observed = normalised(y)
+        if method == "x0-filter":
+            return initial_estimate(yn, observed, rgb, 1, c), None
+        key = (y.data_ptr(), tuple(y.shape))
+        if key not in cache:  # the estimate the passes match on, and a first pass for refine to start from
+            x = fill_holes(yn, observed)
+            cache[key] = (x, block_match(x, rgb, observed, **kw))
+        x, first = cache[key]
+        if method == "bm-exact":
+            return block_match(x, rgb, observed, **kw).dist, None
+        return refine_matches(x, first, rgb, observed, **kw, reach=0, lattice=2).dist, None
+
+    return run
+
+
+def measure_dataloader(workers: int = 2, frames: int = 16, size=(240, 320)) -> dict:
+    """Frames per second of ``examples/restore_in_dataloader.py`` (start-up included), or an error row."""
+    script = Path(__file__).resolve().parents[2] / "examples" / "restore_in_dataloader.py"
+    row = {"method": "dataloader", "height": size[0], "width": size[1], "batch": 1, "workers": workers,
+           "frames": frames}
+    if not script.exists():
+        return {**row, "error": f"{script} not found (the examples ship with the repository, not the wheel)"}
+    t0 = time.perf_counter()
+    p = subprocess.run([sys.executable, str(script), "--workers", str(workers), "--frames", str(frames), "--size",
+                        str(size[0]), str(size[1])], capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    for line in p.stdout.splitlines():
+        if "frames/s" in line:
+            fps = float(line.split("frames/s")[0].split()[-1])
+            return {**row, "fps": fps, "seconds": 1.0 / fps, "wall_seconds": wall, "line": line.strip()}
+    return {**row, "error": (p.stderr or p.stdout)[-2000:]}
 
 
 def _sync(device: str) -> None:
@@ -233,6 +289,12 @@ def run_speed(args) -> int:
         if m not in METHODS:
             raise SystemExit(f"unknown speed method {m!r}; allowed are {list(METHODS)}.")
     results, skipped = [], []
+    if "dataloader" in methods:
+        methods.remove("dataloader")
+        row = measure_dataloader()
+        results.append(row)
+        print("  dataloader (2 workers, 320x240): " + (f"{row['fps']:.2f} frames/s" if "fps" in row
+                                                       else "ERROR " + row["error"]), flush=True)
     for h, w in sizes:
         for b in batches:
             for m in methods:
@@ -252,6 +314,11 @@ def run_speed(args) -> int:
     table = []
     for r in results:
         if "seconds" not in r:
+            continue
+        if r["method"] == "dataloader":
+            table.append({"method": f"dataloader, {r['workers']} workers (frames/s {r['fps']:.2f})",
+                          "size": f"{r['width']}x{r['height']}", "batch": 1, "seconds": r["seconds"],
+                          "ms/frame": 1000.0 * r["seconds"]})
             continue
         k = ref.get((r["height"], r["width"], r["batch"]))
         r["ratio_to_kornia_jbf9"] = r["seconds"] / k if k else None
