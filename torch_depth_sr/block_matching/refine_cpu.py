@@ -12,7 +12,7 @@ import torch
 from numba import njit, prange
 
 from ._common import index_from_offsets
-from .cpu_exact import _ID_NONE, _listed, _offer, _pad, block_match_cpu_exact
+from .cpu_exact import _ID_NONE, _listed, _offer, _pad, block_match_cpu_exact, use_torch_threads
 
 __all__ = ["refine_cpu"]
 
@@ -43,23 +43,26 @@ def _block_distance(xp, tp, cp, use_t, ya, xa, yb, xb, bs, crho, nb):
 
 @njit(cache=True, parallel=True)
 def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, rho, topd, topi):
-    """prev: (B, H, W, kp) offset ids of the previous matches; reach: neighbour distance (0 = none)."""
+    """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none)."""
     bsz = xp.shape[0]
     bs = 2 * r + 1
     s = 2 * big_r + 1
     nc = cp.shape[1]
     nb = float(bs * bs)
-    kp = prev.shape[3]
+    kp = prev.shape[1]
     centre = big_r * s + big_r
     for n in prange(bsz * big_h):
         b = n // big_h
         i = n % big_h
         crho = rho[b] / (nc * nb) if nc > 0 else 0.0
+        xb, tb, cb = xp[b], tp[b], cp[b]  # views made once per row: inside the pixel loop they would cost
+        td = topd[b, i]
+        ti = topi[b, i]
+        pb = prev[b]
         for j in range(big_w):
-            td = topd[b, i]
-            ti = topi[b, i]
-            td[j] = np.inf
-            ti[j] = _ID_NONE
+            for m in range(td.shape[1]):
+                td[j, m] = np.inf
+                ti[j, m] = _ID_NONE
             for src in range(5 if reach > 0 else 1):
                 ni, nj = i, j
                 if src == 1:
@@ -73,30 +76,19 @@ def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self
                 if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
                     continue
                 for m in range(kp):
-                    oid = prev[b, ni, nj, m]
-                    if oid == _ID_NONE or (oid == centre and not include_self):
+                    flat = pb[m, ni, nj]
+                    dy = flat // big_w - ni
+                    dx = flat % big_w - nj
+                    oid = (dy + big_r) * s + dx + big_r
+                    if oid == centre and not include_self:
                         continue
-                    dy = oid // s - big_r
-                    dx = oid % s - big_r
                     if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
                         continue
-                    if _listed(oid, ti, j):
+                    if src > 0 and _listed(oid, ti, j):
                         continue
-                    d = _block_distance(xp[b], tp[b], cp[b], use_t, big_r + i, big_r + j,
-                                        big_r + i + dy, big_r + j + dx, bs, crho, nb)
+                    d = _block_distance(xb, tb, cb, use_t, big_r + i, big_r + j, big_r + i + dy, big_r + j + dx,
+                                        bs, crho, nb)
                     _offer(d, oid, td, ti, j)
-
-
-def offsets_of(index: torch.Tensor, search_window: int) -> torch.Tensor:
-    """Flat indices (B, k, H, W) of matched centres → offset ids ``(dy+R)·S + (dx+R)`` (B, H, W, k) int32."""
-    _, _, h, w = index.shape
-    big_r = search_window // 2
-    rows = torch.arange(h, device=index.device).view(1, 1, h, 1)
-    cols = torch.arange(w, device=index.device).view(1, 1, 1, w)
-    dy = torch.div(index, w, rounding_mode="floor") - rows
-    dx = index % w - cols
-    oid = (dy + big_r) * search_window + dx + big_r
-    return oid.permute(0, 2, 3, 1).to(torch.int32).contiguous()
 
 
 def refine_cpu(depth, rgb, trust, previous_index, block_size, search_window, k, rho, include_self, reach, lattice):
@@ -110,10 +102,11 @@ def refine_cpu(depth, rgb, trust, previous_index, block_size, search_window, k, 
     use_t = trust is not None
     tp = _pad(trust.detach(), r, big_r, dt)[:, 0] if use_t else np.zeros((bsz, 1, 1), xp.dtype)
     cp = _pad(rgb.detach(), r, big_r, dt) if rgb is not None else np.zeros((bsz, 0, 1, 1), xp.dtype)
-    prev = offsets_of(previous_index.cpu(), search_window).numpy()
+    prev = previous_index.detach().cpu().contiguous().numpy()
     topd = np.empty((bsz, h, w, k), dtype=xp.dtype)
     topi = np.empty((bsz, h, w, k), dtype=np.int32)
     rho_np = np.asarray(rho.detach().cpu().double().numpy(), dtype=np.float64)
+    use_torch_threads()
     _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), rho_np, topd, topi)
     if lattice > 0:
         block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, None, lattice,
