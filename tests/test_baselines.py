@@ -430,7 +430,7 @@ class TestDictionaryDenoise:
 @pytest.mark.parametrize("shape,kernel", [((2, 37, 29), 11), ((1, 12, 40), 9), ((3, 6, 9), 11)])
 def test_jbf_in_row_bands_equals_the_whole_image(monkeypatch, budget, shape, kernel):
     """The banded masked JBF (used on GPUs to bound kornia's memory) is bitwise the whole-image one."""
-    import torch_depth_sr.baselines.jbf as jbf_module
+    import torch_depth_sr.guided_filters as jbf_module  # the baseline's JBF lives there
 
     b, h, w = shape
     g = torch.Generator().manual_seed(h * w)

@@ -22,7 +22,7 @@ def fill_holes(depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         x^0_i = y_i \ \text{if } m_i = 1, \qquad
         x^0_i = \uparrow\!\Big(\frac{\downarrow(m\,y)}{\downarrow m}\Big)_i \ \text{otherwise},
 
-    applied recursively over a pyramid until every pixel has support.
+    applied recursively over a pyramid until every pixel has support (:func:`pull_push`, bilinear).
 
     Args:
         depth: ``(B,1,H,W)`` depth; values where ``mask == 0`` are ignored.
@@ -40,22 +40,48 @@ def fill_holes(depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     check_4d(mask, "mask", 1)
     check_same_hw(depth, mask, "depth", "mask")
     mask = mask.to(depth.dtype)
-    values = torch.where(mask > 0, depth, torch.zeros_like(depth))
-    return _push_pull(values * mask, mask)
+    return pull_push(depth, mask, upsample="bilinear")
 
 
-def _push_pull(weighted: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
+def pull_push(values: torch.Tensor, weight: torch.Tensor, upsample: str = "bilinear") -> torch.Tensor:
+    r"""Fill the pixels with zero weight from a pull-push pyramid of weighted means.
+
+    Pull: 2×2 sums of :math:`w\,v` and :math:`w` (ceil mode keeps an odd last row/column), down to
+    the level where every pixel has weight (or to 1×1). Push: each level's means :math:`\sum wv/\sum w`
+    are kept where the level has weight, the others take the next coarser level interpolated
+    (``"bilinear"``, ``align_corners=False``, as :func:`fill_holes`; or ``"nearest"``, as the guided
+    filters' fallback). One implementation for both, so there is one pull-push in the library.
+
+    Args:
+        values: ``(B,C,H,W)`` values, only read where ``weight > 0``.
+        weight: ``(B,1,H,W)`` non-negative weights.
+        upsample: ``"bilinear"`` or ``"nearest"``.
+
+    Returns:
+        ``(B,C,H,W)``: ``values·w/w`` (``values`` for {0,1} weights) where ``weight > 0``, the pyramid
+        elsewhere; 0 where a sample has no weight at all.
+    """
+    if upsample not in ("bilinear", "nearest"):
+        raise ValueError(f"upsample must be 'bilinear' or 'nearest'; got {upsample!r}.")
+    weighted = torch.where(weight > 0, values * weight, torch.zeros_like(values))
+    return _push_pull(weighted, weight, upsample)
+
+
+def _push_pull(weighted: torch.Tensor, weight: torch.Tensor, upsample: str) -> torch.Tensor:
     """Recursive push-pull on (sum of weighted values, sum of weights)."""
     h, w = weighted.shape[-2:]
     estimate = weighted / weight.clamp_min(1e-12)
     if bool((weight > 0).all()) or (h <= 1 and w <= 1):
         return estimate
     # push: 2x2 sums (ceil mode keeps the last odd row/column)
-    coarse_weighted = F.avg_pool2d(weighted, 2, ceil_mode=True) * 4  # (B,1,ceil(H/2),ceil(W/2))
-    coarse_weight = F.avg_pool2d(weight, 2, ceil_mode=True) * 4
-    coarse = _push_pull(coarse_weighted, coarse_weight)
-    # pull: bilinear back to this level; keep the pixels that have support here
-    up = F.interpolate(coarse, size=(h, w), mode="bilinear", align_corners=False)
+    coarse_weighted = F.avg_pool2d(weighted, 2, ceil_mode=True) * 4  # (B,C,ceil(H/2),ceil(W/2))
+    coarse_weight = F.avg_pool2d(weight, 2, ceil_mode=True) * 4  # (B,1,ceil(H/2),ceil(W/2))
+    coarse = _push_pull(coarse_weighted, coarse_weight, upsample)
+    # pull: back to this level; keep the pixels that have support here
+    if upsample == "bilinear":
+        up = F.interpolate(coarse, size=(h, w), mode="bilinear", align_corners=False)
+    else:
+        up = F.interpolate(coarse, size=(h, w), mode="nearest")
     has = (weight > 0).to(estimate.dtype)
     return has * estimate + (1 - has) * up
 

@@ -243,32 +243,39 @@ SIDED_FILL_DEFAULTS = dict(gap=4.0, min_share=0.75, passes=8, choice_sigma_space
 
 
 def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig, return_fill: bool = False):
-    """x⁰ on the observation grid: push-pull fill, or a colour-guided normalised convolution (masked JBF).
+    """x⁰ on the observation grid: a colour-guided normalised convolution, or push-pull without colour.
 
+    ``config.init_fill``: ``"domain"`` — masked domain-transform filter
+    (:func:`~torch_depth_sr.guided_filters.domain_transform_filter`, ``init_dt_*``); ``"jbf"`` — masked joint
+    bilateral filter (:func:`~torch_depth_sr.guided_filters.joint_bilateral_filter`, ``init_kernel_size``,
+    ``init_sigma_*``); ``"pushpull"`` (or no guide) — :func:`~torch_depth_sr.fill.fill_holes`.
     Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` (unless ``config.extra["sided_fill"]``
     is False, or ``init_fill == "pushpull"``): a hole next to a depth gap takes the values of one side.
     With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}: ``confident`` =
     measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from one side.
     """
+    from .fill import fill_holes_sided
+    from .guided_filters import domain_transform_filter, joint_bilateral_filter
+
     sided = bool(c.extra.get("sided_fill", True)) and c.init_fill != "pushpull"
     if guide is None or c.init_fill == "pushpull":
         est = fill_holes(yn, observed)
         g = None
     else:
-        if c.init_fill != "jbf":
-            raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'jbf' and 'pushpull'.")
-        from .baselines.jbf import joint_bilateral_filter
-
         g = guide if factor == 1 else F.avg_pool2d(guide, factor)
-        kernel = min(c.init_kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
-        kernel -= 1 - kernel % 2
-        est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.init_sigma_space,
-                                     sigma_color=c.init_sigma_color)
+        if c.init_fill == "domain":
+            est = domain_transform_filter(yn, g, observed, sigma_space=c.init_dt_sigma_space,
+                                          sigma_color=c.init_dt_sigma_color, iterations=c.init_dt_iterations)
+        elif c.init_fill == "jbf":
+            kernel = min(c.init_kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
+            kernel -= 1 - kernel % 2
+            est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.init_sigma_space,
+                                         sigma_color=c.init_sigma_color)
+        else:
+            raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'domain', 'jbf' and 'pushpull'.")
     confident = torch.ones_like(observed)
     one_side = torch.zeros_like(observed)
     if sided and not bool((observed > 0).all()):
-        from .fill import fill_holes_sided
-
         params = {**SIDED_FILL_DEFAULTS, **c.extra.get("sided_fill_params", {})}
         ambiguous = params.pop("ambiguous")
         kernel = max(3, min(c.init_kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
@@ -316,7 +323,7 @@ def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig,
     bicubic = F.interpolate(x0_lr, scale_factor=factor, mode="bicubic", align_corners=False)
     if c.upsample_init == "bicubic" or guide is None:
         return bicubic
-    from .baselines.jbf import joint_bilateral_upsample
+    from .guided_filters import joint_bilateral_upsample
 
     jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), **c.upsample_jbu)
     if c.upsample_init_band <= 0 or noise is None:
