@@ -91,11 +91,8 @@ def test_errors():
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("threads", [1, 2])
-def test_compiled_kernel_matches_torch_path(monkeypatch, dtype, threads):
-    from torch_depth_sr.block_matching import _load_clib
-
-    if _load_clib() is None:
-        pytest.skip("no C compiler here: only the torch path exists")
+def test_numba_kernel_matches_torch_path(dtype, threads):
+    pytest.importorskip("numba")
     x, y, _ = _scene(seed=4, b=2, noise=1.0)
     x, y = x.to(dtype), y.to(dtype)
     x = x + 0.3 * (y - x)  # an estimate that still carries some of the outliers
@@ -104,18 +101,75 @@ def test_compiled_kernel_matches_torch_path(monkeypatch, dtype, threads):
     old = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
-        qc, pc = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True)
-        monkeypatch.setenv("TORCH_DEPTH_SR_NO_CEXT", "1")
-        qt, pt = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True)
+        qn, pn = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True, backend="numba")
+        qt, pt = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True, backend="torch")
     finally:
         torch.set_num_threads(old)
+    assert qn.dtype == pn.dtype == dtype
     assert 0 < float((qt == 0).sum() - (obs == 0).sum())  # the test does reject some observed pixels
-    assert (qc != qt).float().mean() <= (0 if dtype == torch.float64 else 1e-3)
-    torch.testing.assert_close(pc, pt, atol=1e-5, rtol=1e-4)
+    assert (qn != qt).float().mean() <= (0 if dtype == torch.float64 else 1e-3)
+    torch.testing.assert_close(pn, pt, atol=1e-5, rtol=1e-4)
+
+
+def test_later_rounds_change_q():
+    """Pixels rejected in round 1 leave the statistics, so round 2 trusts or rejects others: Q differs."""
+    x, y, _ = _scene(seed=4, b=1, noise=1.0)
+    x = x + 0.5 * (y - x)  # outliers still in the estimate: they widen σ around them in round 1
+    m = block_match(x, None, None, block_size=3, search_window=9, k=6)
+    obs = torch.ones_like(y)
+    for backend in ("numba", "torch") if _has_numba() else ("torch",):
+        q1 = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=1, backend=backend)
+        q3 = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, backend=backend)
+        assert (q1 != q3).any(), backend
+
+
+def test_stopping_early_at_a_fixed_point_changes_nothing():
+    """Once a round changes no Q, later rounds change nothing: the early exit (CPU) gives the result of all rounds."""
+    from torch_depth_sr.singular import _as_batch, _singular_torch
+
+    x, y, _ = _scene(seed=1, b=1, noise=1.0)  # Q changes in rounds 2 and 3, then stays (some inputs oscillate)
+    m = block_match(x, None, None, block_size=3, search_window=9, k=6)
+    obs = torch.ones_like(y) > 0
+    floor = _as_batch(0.8, "sigma_floor", 1, y)
+    q_all, p_all = _singular_torch(y, obs, x, m, floor, 0.5, rounds=12, early_exit=False)
+    q_one = _singular_torch(y, obs, x, m, floor, 0.5, rounds=1, early_exit=False)[0]
+    q_11 = _singular_torch(y, obs, x, m, floor, 0.5, rounds=11, early_exit=False)[0]
+    assert not torch.equal(q_one, q_all) and torch.equal(q_11, q_all)  # Q changes, then reaches a fixed point
+    for backend in ("numba", "torch") if _has_numba() else ("torch",):
+        q, p = detect_singular(y, x, obs.float(), m, sigma_floor=0.8, rounds=12, return_confidence=True,
+                               backend=backend)
+        assert torch.equal(q, q_all), backend
+        torch.testing.assert_close(p, p_all, atol=1e-6, rtol=1e-5)
+
+
+def test_backend_errors():
+    x, y, _ = _scene()
+    m = block_match(x, None, None, block_size=5, search_window=11, k=8)
+    with pytest.raises(DepthSRError, match="backend must be"):
+        detect_singular(y, x, torch.ones_like(y), m, sigma_floor=0.5, backend="c")
+
+
+def test_inputs_not_modified():
+    x, y, _ = _scene(b=2)
+    obs = (torch.rand(y.shape, generator=torch.Generator().manual_seed(3)) > 0.1).float()
+    m = block_match(x, None, None, block_size=3, search_window=9, k=6)
+    before = [t.clone() for t in (y, x, obs, m.index, m.weight)]
+    for backend in ("numba", "torch") if _has_numba() else ("torch",):
+        detect_singular(y, x, obs, m, sigma_floor=0.8, backend=backend)
+        for a, b in zip(before, (y, x, obs, m.index, m.weight)):
+            assert torch.equal(a, b)
+
+
+def _has_numba():
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_subnormal_weight_sum_gives_no_nan(monkeypatch, dtype):
+def test_subnormal_weight_sum_gives_no_nan(dtype):
     """A pixel whose only trusted neighbour has a subnormal weight: 1/s overflows unless clamped.
 
     (Found through a NaN in the confidence map written by ``torch-depth-sr restore --confidence``.)
@@ -130,11 +184,9 @@ def test_subnormal_weight_sum_gives_no_nan(monkeypatch, dtype):
     index = torch.stack([torch.tensor([[1, 0, 0]]), torch.tensor([[2, 2, 1]])]).view(1, k, h, w)
     weight = torch.stack([torch.tensor([[1.0, 0.5, 0.5]]), torch.tensor([[tiny, 0.5, 0.5]])]).view(1, k, h, w)
     m = BlockMatches(torch.zeros(1, k, h, w, dtype=dtype), index, weight.to(dtype))
-    out = {}
-    for path in ("c", "torch"):
-        if path == "torch":
-            monkeypatch.setenv("TORCH_DEPTH_SR_NO_CEXT", "1")
-        out[path] = detect_singular(y, x, obs, m, sigma_floor=0.5, rounds=1, return_confidence=True)
+    out = {path: detect_singular(y, x, obs, m, sigma_floor=0.5, rounds=1, return_confidence=True, backend=path)
+           for path in (("numba", "torch") if _has_numba() else ("torch",))}
     for path, (q, p) in out.items():
         assert torch.isfinite(p).all(), path
-    torch.testing.assert_close(out["c"][1], out["torch"][1])
+    if "numba" in out:
+        torch.testing.assert_close(out["numba"][1], out["torch"][1])

@@ -20,15 +20,15 @@ import math
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from typing import Optional
+from typing import Optional, Sequence
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .block_matching import BlockMatches, block_match, gather_neighbors
+from .block_matching import BlockMatches, block_match
 from .config import RestorerConfig
-from .nonlocal_prior import nonlocal_gradient
+from .nonlocal_prior import nonlocal_terms, nonlocal_value_prior  # noqa: F401 (nonlocal_value_prior: re-export)
 from .operators import LinearOperator, grad, grad_adjoint, laplacian
 from .shrinkage import group_soft_threshold, soft_threshold
 from .singular import detect_singular, neighbour_support
@@ -52,22 +52,29 @@ class RestorationState:
     alpha: torch.Tensor  # (B,2,H,W)
     q: torch.Tensor  # (B,1,h,w) {0,1} trusted pixels
     confidence: torch.Tensor  # (B,1,h,w) in [0,1]
-    matches: Optional[BlockMatches]
-    cg_iterations: list
-    timings: dict  # seconds per stage, accumulated over layers
+    matches: Optional[BlockMatches]  # weights included (differentiable in the temperature)
+    cg_iterations: list  # per layer, a (B,) int64 tensor of CG iterations (read only when reported)
+    timings: Optional[dict] = None  # seconds per stage, accumulated over layers; None = not timed
 
 
 @contextmanager
-def stage(timings: dict, name: str, device: torch.device):
-    """Accumulate the wall time of a stage (synchronising CUDA so the time is real)."""
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-    t0 = time.perf_counter()
+def stage(timings: Optional[dict], name: str, device: torch.device):
+    """Accumulate the wall time of a stage into ``timings``; with ``timings=None`` nothing is timed.
+
+    Timing synchronises CUDA before and after the stage (so the time is real), which a forward that is not
+    timed must not do: the host would wait for the device at every stage.
+    """
     with torch.profiler.record_function(f"stage:{name}"):  # a no-op unless a profiler is running
+        if timings is None:
+            yield
+            return
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        t0 = time.perf_counter()
         yield
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-    timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+        timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
 
 @dataclass
@@ -84,6 +91,9 @@ class RestorationContext:
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
     grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
     fill_confident: Optional[torch.Tensor] = None  # (B,1,h,w) {0,1}: measured, or a hole filled from a clear side
+    # (B,1,h,w) bool: measured pixels with enough agreeing measured neighbours (config.singular_support), which
+    # the singular test always trusts; depends on y only, so it is computed once per forward (supported_pixels)
+    supported: Optional[torch.Tensor] = None
 
     degradation: Optional[LinearOperator] = None  # K when factor > 1 (None: area averaging)
 
@@ -102,18 +112,24 @@ class RestorationContext:
 
 
 def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor) -> BlockMatches:
-    """Block matching on the current estimate; untrusted pixels masked out of the depth distance."""
+    """Block matching on the current estimate; untrusted pixels masked out of the depth distance.
+
+    The weights ``softmax(−d/h)`` come with the matches, differentiable in the temperature ``h`` when it
+    requires grad; the search itself runs without gradient.
+    """
     c = ctx.config
-    trust = q if ctx.factor == 1 else None
-    with torch.no_grad():
-        return block_match(x.detach(), ctx.rgb, trust, block_size=c.block_size, search_window=c.search_window,
-                           k=c.k, color_weight=float(ctx.color_weight), temperature=float(ctx.temperature),
-                           include_self=c.include_self)
+    trust = q.detach() if ctx.factor == 1 else None
+    return block_match(x.detach(), ctx.rgb, trust, block_size=c.block_size, search_window=c.search_window,
+                       k=c.k, color_weight=ctx.color_weight.detach(), temperature=ctx.temperature,
+                       include_self=c.include_self)
 
 
-def match_weights(matches: BlockMatches, ctx: RestorationContext) -> torch.Tensor:
-    """ω = softmax(−d/h) over the kept blocks, differentiable in the temperature h."""
-    return torch.softmax(-matches.dist / ctx.temperature, dim=1)
+def cg_iterations_for(c: RestorerConfig, index: int) -> Optional[int]:
+    """The fixed CG iteration count of layer ``index`` (the schedule's last entry repeats); None = to ``cg_tol``."""
+    sched: Sequence[int] = c.cg_fixed_iters
+    if not sched:
+        return None
+    return int(sched[min(index, len(sched) - 1)])
 
 
 class UnrolledLayer(nn.Module):
@@ -157,8 +173,15 @@ class UnrolledLayer(nn.Module):
         if matches is not None and self.index in c.match_layers:
             with stage(s.timings, "block_matching", dev):
                 matches = run_block_matching(s.x, ctx, s.q)
-        if c.use_nonlocal:
-            alpha = nonlocal_gradient(dx, matches._replace(weight=match_weights(matches, ctx)))
+        value_prior = c.nl_value_weight > 0 and ctx.factor == 1 and matches is not None
+        diag = target = None
+        if c.use_nonlocal or value_prior:
+            with stage(s.timings, "nonlocal", dev):
+                new_alpha, diag, target = nonlocal_terms(
+                    s.x, dx if c.use_nonlocal else None, matches, value_weight=c.nl_value_weight if value_prior else 0.0,
+                    max_var=c.nl_value_var, max_offset=c.nl_value_offset)
+            if c.use_nonlocal:
+                alpha = new_alpha
         if c.use_singular and ctx.factor == 1:
             with stage(s.timings, "singular", dev):
                 q, conf = singular_test(ctx, s.x, matches)
@@ -167,13 +190,11 @@ class UnrolledLayer(nn.Module):
             rhs = rhs + prior_weight(ctx, q) * ctx.prior
         if c.use_nonlocal:
             rhs = rhs + mu2 * grad_adjoint(w + alpha)
-        diag = None
-        if c.nl_value_weight > 0 and ctx.factor == 1 and matches is not None:
-            diag, target = nonlocal_value_prior(s.x, matches._replace(weight=match_weights(matches, ctx)),
-                                                c.nl_value_weight, c.nl_value_var, c.nl_value_offset)
+        if diag is not None:
             rhs = rhs + diag * target
         with stage(s.timings, "cg", dev):
-            x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations, diag=diag)
+            x = solve_x(ctx, q, mu1 + mu2, rhs, s.x, s.cg_iterations, diag=diag,
+                        iterations=cg_iterations_for(c, self.index))
         return replace(s, x=x, z=z, w=w, e=e, alpha=alpha, q=q, confidence=conf, matches=matches)
 
     def extra_repr(self) -> str:
@@ -187,11 +208,9 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
         q, conf = detect_singular(ctx.y, x.detach(), ctx.observed, matches, sigma_floor=c.singular_sigma_floor,
                                   tau=c.singular_tau, rounds=c.singular_rounds, return_confidence=True)
         if c.singular_support > 0:
-            # y is in units of the scale, which is the noise σ̂ unless a floor of the scale policy took over
-            tol = torch.as_tensor(c.singular_support_tol, dtype=ctx.y.dtype, device=ctx.y.device)
-            if ctx.grid_step is not None:  # neighbours one grid step apart lie on the same surface (slanted, clean)
-                tol = torch.maximum(tol, 1.01 * ctx.grid_step.to(ctx.y))
-            supported = neighbour_support(ctx.y, ctx.observed, tol) >= c.singular_support
+            if ctx.supported is None:
+                ctx.supported = supported_pixels(ctx)
+            supported = ctx.supported
             q = torch.where(supported, ctx.observed.to(q.dtype), q)
             conf = torch.where(supported, torch.maximum(conf, torch.full_like(conf, c.singular_tau)), conf)
         if c.singular_gate > 0:
@@ -206,6 +225,17 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
     return q.to(x.dtype), conf.to(x.dtype)
 
 
+def supported_pixels(ctx: RestorationContext) -> torch.Tensor:
+    """Measured pixels with at least ``singular_support`` measured 8-neighbours within the tolerance, (B,1,h,w)."""
+    c = ctx.config
+    with torch.no_grad():
+        # y is in units of the scale, which is the noise σ̂ unless a floor of the scale policy took over
+        tol = torch.as_tensor(c.singular_support_tol, dtype=ctx.y.dtype, device=ctx.y.device)
+        if ctx.grid_step is not None:  # neighbours one grid step apart lie on the same surface (slanted, clean)
+            tol = torch.maximum(tol, 1.01 * ctx.grid_step.to(ctx.y))
+        return neighbour_support(ctx.y, ctx.observed, tol) >= c.singular_support
+
+
 def prior_weight(ctx: RestorationContext, q: torch.Tensor) -> torch.Tensor:
     """β on missing pixels, and on singular ones unless ``config.prior_on_singular`` is off."""
     c = ctx.config
@@ -213,39 +243,15 @@ def prior_weight(ctx: RestorationContext, q: torch.Tensor) -> torch.Tensor:
     return c.guided_prior * untrusted
 
 
-def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float,
-                         max_offset: float = 2.5):
-    """``(W, x̄)``: a nonlocal estimate x̄ of each pixel's value from its matched centres, and a weight map.
-
-    The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal-means
-    estimate of the depth itself, trusted (W = η₃) only where the centres' values agree (weighted variance
-    below ``max_var`` noise σ², the units of ``x``) and their weighted centroid lies within ``max_offset``
-    pixels: where the centres straddle an edge x̄ would blur it, and where they all lie on one side (image
-    borders) it is biased on any slope (Σ w (x_i + g·d) = x_i only when Σ w d = 0). Carrying each centre along
-    the nonlocal gradient α instead was tried and blurred edges (α is large there). Adds η₃/2 ‖x − x̄‖² on
-    those pixels to the x-subproblem.
-    """
-    w = matches.weight
-    idx = matches.index
-    h, wd = x.shape[-2:]
-    rows = torch.arange(h, device=x.device, dtype=x.dtype).view(1, 1, h, 1)
-    cols = torch.arange(wd, device=x.device, dtype=x.dtype).view(1, 1, 1, wd)
-    oy = torch.div(idx, wd, rounding_mode="floor").to(x.dtype) - rows  # (B, k, H, W) offsets of the centres
-    ox = (idx % wd).to(x.dtype) - cols
-    xj = gather_neighbors(x, idx)[:, 0]  # (B, k, H, W)
-    xbar = (w * xj).sum(1, keepdim=True)
-    var = (w * (xj - xbar) ** 2).sum(1, keepdim=True)
-    centroid = (w * oy).sum(1, keepdim=True).square() + (w * ox).sum(1, keepdim=True).square()
-    agree = (var.detach() < max_var) & (centroid.detach() <= max_offset ** 2)
-    return weight * agree.to(x.dtype), xbar
-
-
 def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
-            log: list, diag: Optional[torch.Tensor] = None) -> torch.Tensor:
+            log: list, diag: Optional[torch.Tensor] = None, iterations: Optional[int] = None) -> torch.Tensor:
     """Solve (KᵀQK + β(1−Q) + μ DᵀD) x = rhs by preconditioned CG, warm-started at ``x0``.
 
     β(1−Q) is the weak pull of untrusted (missing or singular) pixels to the colour-guided estimate
-    (``config.guided_prior``; absent when there is no guide or K ≠ I).
+    (``config.guided_prior``; absent when there is no guide or K ≠ I). With ``iterations`` CG runs that many
+    iterations (a sample that reaches ``cg_tol`` earlier stops changing) and never makes the host wait for
+    the device; with None it iterates until every sample reaches ``cg_tol`` (at most ``cg_max_iter``).
+    Appends the ``(B,)`` iteration counts to ``log``.
     """
     c = ctx.config
     q = q.detach()
@@ -264,7 +270,9 @@ def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: tor
         if beta is not None:
             a = a + beta.flatten(1).mean(1)
         precond = NeumannPreconditioner(a.detach(), mu.detach())
-    res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=precond, tol=c.cg_tol, max_iter=c.cg_max_iter,
-                   implicit=c.implicit_backward, params=(mu,) if mu.requires_grad else ())
-    log.append(int(res.iterations.max()))
+    fixed = iterations is not None
+    res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=precond, tol=c.cg_tol,
+                   max_iter=iterations if fixed else c.cg_max_iter, implicit=c.implicit_backward,
+                   params=(mu,) if mu.requires_grad else (), early_exit=not fixed, backward_max_iter=c.cg_max_iter)
+    log.append(res.iterations)
     return res.x

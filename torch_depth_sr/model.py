@@ -24,8 +24,9 @@ from .config import ABLATIONS, PRESETS, RestorerConfig, load_config_file
 from .errors import DepthSRError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .fill import fill_holes
-from .layers import RestorationContext, RestorationState, UnrolledLayer, match_weights, run_block_matching, singular_test, stage
-from .nonlocal_prior import nonlocal_gradient
+from .layers import (RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage,
+                     supported_pixels)
+from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
 from .operators import BicubicDownsample, grad
 
@@ -100,9 +101,15 @@ class DepthRestorer(nn.Module):
         return cls(**{**PRESETS[name], **overrides})
 
     def forward(self, depth, rgb=None, mask=None, noise_sigma=None, scale_factor: Optional[int] = None,
-                return_details: bool = False, fill: str = "all"):
-        """Restore ``depth`` guided by ``rgb``; see :func:`restore_depth` for the arguments."""
+                return_details: bool = False, fill: str = "all", timings: Optional[bool] = None):
+        """Restore ``depth`` guided by ``rgb``; see :func:`restore_depth` for the arguments.
+
+        ``timings``: record the wall time of each stage in ``info["seconds"]`` (default: when
+        ``return_details``). Timing synchronises CUDA around every stage; an untimed forward does not make the
+        host wait for the device inside the layers.
+        """
         _check_fill(fill)
+        timed = return_details if timings is None else bool(timings)
         dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
         y, observed, layout = parse_depth(depth, mask, dtype)
         dev = self.log_temperature.device  # compute where the model lives; the result goes back to the input's device
@@ -124,15 +131,18 @@ class DepthRestorer(nn.Module):
         o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
         yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
         grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
+        if timed and y.device.type == "cuda":
+            torch.cuda.synchronize(y.device)
         t0 = time.perf_counter()
         with torch.set_grad_enabled(grad_needed):
-            state, ctx = self._initial_state(yn, observed, guide, factor, noise=sigma / scale)
-            ctx.grid_step = step / scale
+            state, ctx = self._initial_state(yn, observed, guide, factor, noise=sigma / scale, grid_step=step / scale,
+                                             timings={} if timed else None)
             for layer in self.layers:
                 state = layer(state, ctx)
-        if state.x.device.type == "cuda":
-            torch.cuda.synchronize(state.x.device)
-        state.timings["total"] = time.perf_counter() - t0
+        if timed:
+            if state.x.device.type == "cuda":
+                torch.cuda.synchronize(state.x.device)
+            state.timings["total"] = time.perf_counter() - t0
         x = state.x
         if factor == 1 and self.config.fidelity_band > 0:
             band = noise_band(step / scale, sigma / scale, self.config.fidelity_band)  # in units of the scale
@@ -145,23 +155,26 @@ class DepthRestorer(nn.Module):
             return out
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
                 "implausible_pixels": glitches.flatten(1).sum(1).tolist(),
-                "cg_iterations": state.cg_iterations, "factor": factor, "seconds": dict(state.timings)}
+                "cg_iterations": [int(n.max()) for n in state.cg_iterations], "factor": factor,
+                "seconds": dict(state.timings or {})}
         conf, trusted, outliers = (map_layout(t, layout)
                                    for t in (state.confidence * observed, state.q, state.e * s4))
         return RestorationResult(out, conf, trusted, outliers, info)
 
-    def _initial_state(self, yn, observed, guide, factor, noise=None):
+    def _initial_state(self, yn, observed, guide, factor, noise=None, grid_step=None, timings=None):
         c = self.config
         ctx = RestorationContext(y=yn, observed=observed, rgb=guide, factor=factor, config=c,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp(),
+                                 grid_step=grid_step,
                                  degradation=BicubicDownsample(factor) if c.degradation == "bicubic" else None)
+        if c.use_singular and factor == 1 and c.singular_support > 0:
+            ctx.supported = supported_pixels(ctx)  # depends on y only: once per forward, not per layer
         # colour-guided estimate, every pixel; holes at depth gaps filled from one side (fill_holes_sided)
         guided, ctx.fill_confident, _ = initial_estimate(yn, observed, guide, factor, c, return_fill=True)
         keep = c.init_keep_observed and guided is not None
         x0 = torch.where(observed > 0, yn, guided) if keep else guided
         b = yn.shape[0]
         matches, q, conf = None, observed, observed
-        timings: dict = {}
         detect_first = c.use_singular and factor == 1 and c.init_singular and guide is not None
         if detect_first:
             # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
@@ -183,7 +196,7 @@ class DepthRestorer(nn.Module):
             with stage(timings, "block_matching", x0.device):
                 matches = run_block_matching(x0, ctx, observed)
         if c.use_nonlocal:
-            alpha = nonlocal_gradient(grad(x0), matches._replace(weight=match_weights(matches, ctx)))
+            alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
         state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=q,
                                  confidence=conf, matches=matches, cg_iterations=[], timings=timings)
         return state, ctx

@@ -1,4 +1,4 @@
-"""Nonlocal estimate of the gradient (paper §II-B): the weighted mean over the matched blocks.
+"""The nonlocal terms: the gradient estimate α (paper §II-B) and the value prior (beyond the paper).
 
 .. math::
 
@@ -6,9 +6,14 @@
 
 where ``j_m(i)`` is the centre of the ``m``-th block most similar to the block around ``i`` and
 ``ω`` the block-matching weights. ``η‖Dx − α‖₁`` then pulls the gradient at ``i`` towards the
-gradients at similar places (like NCSR's centralised sparsity).
+gradients at similar places (like NCSR's centralised sparsity). :func:`nonlocal_value_prior` uses the
+matched centres' values; :func:`nonlocal_terms` computes both from one read of the matches (one gather on
+the torch path, a numba kernel on the CPU when no gradient is needed).
 """
 from __future__ import annotations
+
+import os
+from typing import Optional, Tuple
 
 import torch
 
@@ -16,7 +21,7 @@ from ._checks import check_4d
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import ShapeError
 
-__all__ = ["nonlocal_gradient"]
+__all__ = ["nonlocal_gradient", "nonlocal_terms", "nonlocal_value_prior"]
 
 
 def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tensor:
@@ -48,3 +53,107 @@ def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tens
     neigh = gather_neighbors(grad_x, matches.index)  # (B, C, k, H, W)
     w = matches.weight.to(grad_x.dtype).unsqueeze(1)  # (B, 1, k, H, W)
     return (w * neigh).sum(dim=2)  # (B, C, H, W)
+
+
+def _value_prior(xbar, var, offset2, weight: float, max_var: float, max_offset: float):
+    agree = (var.detach() < max_var) & (offset2.detach() <= max_offset ** 2)
+    return weight * agree.to(xbar.dtype), xbar
+
+
+def _centroid_offset2(index: torch.Tensor, w: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """Squared length of the weighted mean offset ``Σ ω (j − i)`` of the matched centres, ``(B,1,H,W)``."""
+    h, wd = like.shape[-2:]
+    rows = torch.arange(h, device=like.device, dtype=like.dtype).view(1, 1, h, 1)
+    cols = torch.arange(wd, device=like.device, dtype=like.dtype).view(1, 1, 1, wd)
+    oy = torch.div(index, wd, rounding_mode="floor").to(like.dtype) - rows  # (B, k, H, W)
+    ox = (index % wd).to(like.dtype) - cols
+    return (w * oy).sum(1, keepdim=True).square() + (w * ox).sum(1, keepdim=True).square()
+
+
+def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float,
+                         max_offset: float = 2.5) -> Tuple[torch.Tensor, torch.Tensor]:
+    """``(W, x̄)``: a nonlocal estimate x̄ of each pixel's value from its matched centres, and a weight map.
+
+    The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal-means
+    estimate of the depth itself, trusted (W = η₃) only where the centres' values agree (weighted variance
+    below ``max_var`` noise σ², the units of ``x``) and their weighted centroid lies within ``max_offset``
+    pixels: where the centres straddle an edge x̄ would blur it, and where they all lie on one side (image
+    borders) it is biased on any slope (Σ w (x_i + g·d) = x_i only when Σ w d = 0). Carrying each centre along
+    the nonlocal gradient α instead was tried and blurred edges (α is large there). Adds η₃/2 ‖x − x̄‖² on
+    those pixels to the x-subproblem.
+    """
+    _, diag, target = nonlocal_terms(x, None, matches, value_weight=weight, max_var=max_var, max_offset=max_offset)
+    return diag, target
+
+
+def _kernel():
+    """The numba kernel, or None where numba is missing or ``TORCH_DEPTH_SR_NO_NUMBA`` is set."""
+    if os.environ.get("TORCH_DEPTH_SR_NO_NUMBA", "") not in ("", "0"):
+        return None
+    try:
+        from .nonlocal_kernel import nonlocal_terms_cpu
+    except ImportError:  # the singular test's loader has already warned that numba is missing
+        return None
+    return nonlocal_terms_cpu
+
+
+def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: BlockMatches, *,
+                   value_weight: float = 0.0, max_var: float = 0.25, max_offset: float = 2.5,
+                   backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
+    """α, and the value prior ``(W, x̄)``, from one read of the matches.
+
+    Args:
+        x: ``(B,1,H,W)`` current estimate.
+        grad_x: ``(B,2,H,W)`` its gradient ``D x``, or None (no α).
+        matches: :class:`~torch_depth_sr.block_matching.BlockMatches` of ``x``, weights included.
+        value_weight, max_var, max_offset: the value prior's η₃ and gates (:func:`nonlocal_value_prior`);
+            ``value_weight = 0`` skips it.
+        backend: ``"auto"`` (the numba kernel for float CPU tensors when no gradient is needed, else torch),
+            ``"torch"``.
+
+    Returns:
+        ``(α or None, W or None, x̄ or None)``; differentiable in ``x``, ``grad_x`` and ``matches.weight``
+        (W carries none: it is a 0/η₃ mask).
+
+    Examples:
+        >>> from torch_depth_sr.block_matching import block_match
+        >>> from torch_depth_sr.operators import grad
+        >>> x = torch.rand(1, 1, 16, 16)
+        >>> m = block_match(x, None, None, block_size=3, search_window=7, k=4)
+        >>> alpha, diag, target = nonlocal_terms(x, grad(x), m, value_weight=10.0)
+        >>> alpha.shape, diag.shape, target.shape
+        (torch.Size([1, 2, 16, 16]), torch.Size([1, 1, 16, 16]), torch.Size([1, 1, 16, 16]))
+    """
+    if backend not in ("auto", "torch"):
+        raise ValueError(f"backend must be 'auto' or 'torch'; got {backend!r}.")
+    check_4d(x, "x", channels=1)
+    if grad_x is not None:
+        check_4d(grad_x, "grad_x", channels=2)
+    if matches.index.shape != matches.weight.shape:
+        raise ShapeError(f"matches.index {tuple(matches.index.shape)} and matches.weight "
+                         f"{tuple(matches.weight.shape)} must have the same shape (B,k,H,W).")
+    value = value_weight > 0
+    if grad_x is None and not value:
+        return None, None, None
+    tracked = torch.is_grad_enabled() and (x.requires_grad or matches.weight.requires_grad
+                                           or (grad_x is not None and grad_x.requires_grad))
+    kernel = None
+    if backend == "auto" and not tracked and x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64):
+        kernel = _kernel()
+    if kernel is not None:
+        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight)
+    else:
+        w = matches.weight.to(x.dtype)  # (B, k, H, W)
+        planes = x if grad_x is None else torch.cat([grad_x, x], dim=1)  # one gather for α and x̄
+        neigh = gather_neighbors(planes, matches.index)  # (B, C, k, H, W)
+        alpha = None if grad_x is None else (w.unsqueeze(1) * neigh[:, :2]).sum(dim=2)  # (B, 2, H, W)
+        if not value:
+            return alpha, None, None
+        xj = neigh[:, -1]  # (B, k, H, W)
+        xbar = (w * xj).sum(1, keepdim=True)
+        var = (w * (xj - xbar) ** 2).sum(1, keepdim=True)
+        offset2 = _centroid_offset2(matches.index, w, x)
+    if not value:
+        return alpha, None, None
+    diag, target = _value_prior(xbar, var, offset2, value_weight, max_var, max_offset)
+    return alpha, diag, target

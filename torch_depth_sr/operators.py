@@ -15,6 +15,7 @@ Functions hold the maths; the classes :class:`Gradient`, :class:`Identity` and
 """
 from __future__ import annotations
 
+import functools
 from typing import Sequence
 
 import torch
@@ -311,6 +312,17 @@ class AreaDownsample(LinearOperator):
         return f"AreaDownsample(s={self.s})"
 
 
+@functools.lru_cache(maxsize=32)
+def _bicubic_matrix(n: int, s: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """The ``(n/s, n)`` matrix of the 1-D antialiased bicubic resize, shared by every operator (the model builds
+    one per forward)."""
+    # resizing the rows of the identity gives the matrix itself (the columns keep their size: torch's
+    # width-1 images take another path, which does not match the 2-D resize)
+    eye = torch.eye(n, dtype=torch.float64, device=device)[None, None]
+    a = torch.nn.functional.interpolate(eye, size=(n // s, n), mode="bicubic", antialias=True, align_corners=False)
+    return a[0, 0].contiguous().to(dtype)
+
+
 class BicubicDownsample(LinearOperator):
     """Antialiased bicubic downsampling by an integer factor ``s``: the degradation of the guided
     super-resolution protocol of DKN/FDSR/DCTNet (Pillow's bicubic resize, which torch's
@@ -329,18 +341,9 @@ class BicubicDownsample(LinearOperator):
 
     def __init__(self, s: int) -> None:
         self.s = _check_factor(s)
-        self._cache: dict = {}
 
     def _matrix(self, n: int, device, dtype) -> torch.Tensor:
-        key = (n, device, dtype)
-        if key not in self._cache:
-            # resizing the rows of the identity gives the matrix itself (the columns keep their size: torch's
-            # width-1 images take another path, which does not match the 2-D resize)
-            eye = torch.eye(n, dtype=torch.float64, device=device)[None, None]
-            a = torch.nn.functional.interpolate(eye, size=(n // self.s, n), mode="bicubic", antialias=True,
-                                                align_corners=False)
-            self._cache[key] = a[0, 0].contiguous().to(dtype)  # (n/s, n)
-        return self._cache[key]
+        return _bicubic_matrix(n, self.s, torch.device(device), dtype)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h, w = x.shape[-2:]

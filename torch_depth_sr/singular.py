@@ -21,9 +21,10 @@ matched centre is credible, the statistics use all ``k`` centres with their orig
 """
 from __future__ import annotations
 
+import math
 import os
-from concurrent.futures import ThreadPoolExecutor
-from typing import Optional, Tuple, Union
+import warnings
+from typing import Tuple, Union
 
 import torch
 
@@ -35,14 +36,20 @@ __all__ = ["detect_singular", "neighbour_support"]
 
 
 def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
+    """``(B,1,1,1)`` of a float or a ``(B,)``/one-element tensor, refused unless finite and > 0.
+
+    A float is checked on the host; a tensor's check reads it (one host synchronisation on a GPU).
+    """
     if isinstance(value, torch.Tensor):
         if value.numel() not in (1, b) or value.ndim > 1:
             raise ShapeError(f"{name} must be a float or a ({b},) tensor; got shape {tuple(value.shape)}.")
         v = value.detach().to(like).reshape(-1).expand(b) if value.numel() == 1 else value.detach().to(like)
+        if bool((~torch.isfinite(v) | (v <= 0)).any()):
+            raise DepthSRError(f"{name} must be finite and > 0; got {v.tolist()}.")
     else:
+        if not (math.isfinite(float(value)) and float(value) > 0):
+            raise DepthSRError(f"{name} must be finite and > 0; got {float(value)!r}.")
         v = torch.full((b,), float(value), dtype=like.dtype, device=like.device)
-    if bool((~torch.isfinite(v) | (v <= 0)).any()):
-        raise DepthSRError(f"{name} must be finite and > 0; got {v.tolist()}.")
     return v.view(b, 1, 1, 1)
 
 
@@ -78,61 +85,61 @@ def neighbour_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
     return count * obs
 
 
-def _detect_singular_c(y0, obs, xv, matches: BlockMatches, floor, tau: float, rounds: int
-                       ) -> Optional[Tuple[torch.Tensor, torch.Tensor]]:
-    """The test by the compiled kernel (CPU, float32/64); None where it does not apply.
+_KERNEL = None
+_KERNEL_FAILED = None  # why the numba kernel is unavailable (warned once)
 
-    The torch path below makes ~30 passes over ``(B, k, H, W)`` tensors per round; the kernel reads
-    the k matches of a pixel once per round (about 40× faster at 640×480). Same arithmetic,
-    pixel by pixel, so ``Q`` and ``P`` agree with the torch path to float round-off. Each round's
-    pixels are split into row bands across ``torch.get_num_threads()`` threads.
+
+def _numba_kernel():
+    """:func:`~torch_depth_sr.singular_kernel.singular_rounds_cpu`, or None (warned once) without numba.
+
+    ``TORCH_DEPTH_SR_NO_NUMBA=1`` disables it, as it does block matching's kernels.
     """
-    from .block_matching import _load_clib
+    global _KERNEL, _KERNEL_FAILED
+    if _KERNEL is None and _KERNEL_FAILED is None:
+        if os.environ.get("TORCH_DEPTH_SR_NO_NUMBA", "") not in ("", "0"):
+            _KERNEL_FAILED = "TORCH_DEPTH_SR_NO_NUMBA is set"
+        else:
+            try:
+                from .singular_kernel import singular_rounds_cpu
+            except ImportError as exc:  # numba missing or broken for this numpy/python
+                _KERNEL_FAILED = f"numba could not be imported ({exc})"
+                warnings.warn(f"torch_depth_sr: {_KERNEL_FAILED}; the singular-pixel test on the CPU falls back to "
+                              "the torch path (same results, several times slower). `pip install numba` restores "
+                              "the fast path.", RuntimeWarning, stacklevel=3)
+            else:
+                _KERNEL = singular_rounds_cpu
+    return _KERNEL
 
-    if y0.device.type != "cpu" or y0.dtype not in (torch.float32, torch.float64) or matches.index.shape[1] > 256 \
-            or os.environ.get("TORCH_DEPTH_SR_NO_CEXT", "") not in ("", "0"):
-        return None
-    lib = _load_clib()
-    if lib is None:
-        return None
-    b, _, h, w = y0.shape
-    hw = h * w
-    k = matches.index.shape[1]
+
+def _singular_torch(y0, obs, xv, matches: BlockMatches, floor, tau: float, rounds: int, early_exit=None):
+    """The test in tensor operations (any device; the reference of the numba kernel).
+
+    Runs ``rounds`` rounds. With ``early_exit`` (default: on the CPU) it stops once ``Q`` stops changing (a
+    later round would give the same ``Q`` and ``P``); on other devices that test would make the host wait for
+    the device every round, so every round runs.
+    """
+    if early_exit is None:
+        early_exit = y0.device.type == "cpu"
     dt = y0.dtype
-    fn = lib.singular_round_f64 if dt == torch.float64 else lib.singular_round_f32
-    y0c = y0.contiguous()
-    xc = xv.contiguous()
-    obs8 = obs.to(torch.uint8).contiguous()
-    idx = matches.index.detach().to(torch.int64).contiguous()  # (B, k, H, W)
-    w0 = matches.weight.detach().to(dt).contiguous()  # (B, k, H, W)
-    q_prev = obs.to(dt).contiguous()
-    q_next = torch.empty_like(y0c)
-    p = torch.empty_like(y0c)
-    fl = floor.reshape(-1).tolist()
-    workers = max(1, min(torch.get_num_threads(), os.cpu_count() or 1))
-    bands = max(1, min(h, 4 * workers if workers > 1 else 1))
-    cuts = [round(t * h / bands) * w for t in range(bands + 1)]
-    jobs = [(i, cuts[t], cuts[t + 1]) for i in range(b) for t in range(bands) if cuts[t + 1] > cuts[t]]
-    pool = ThreadPoolExecutor(max_workers=workers) if workers > 1 and len(jobs) > 1 else None
-
-    def run(job):
-        i, i0, i1 = job
-        n = fn(y0c[i].data_ptr(), obs8[i].data_ptr(), xc[i].data_ptr(), idx[i].data_ptr(), w0[i].data_ptr(),
-               hw, k, fl[i], tau, q_prev[i].data_ptr(), q_next[i].data_ptr(), p[i].data_ptr(), i0, i1)
-        if n < 0:
-            raise DepthSRError(f"singular kernel refused k={k} matches (at most 256).")
-        return n
-
-    try:
-        for _ in range(rounds):
-            changed = sum(pool.map(run, jobs)) if pool is not None else sum(map(run, jobs))
-            q_prev, q_next = q_next, q_prev
-            if changed == 0:
-                break
-    finally:
-        if pool is not None:
-            pool.shutdown()
-    return q_prev, p
+    xj = gather_neighbors(xv, matches.index)[:, 0]  # (B, k, H, W)
+    w0 = matches.weight.detach().to(dt)  # (B, k, H, W)
+    q = obs.clone()
+    p = torch.zeros_like(y0)
+    for _ in range(rounds):
+        qj = gather_neighbors(q.to(dt), matches.index)[:, 0]  # (B, k, H, W)
+        w = w0 * qj
+        s = w.sum(dim=1, keepdim=True)  # (B, 1, H, W)
+        w = torch.where(s > 0, w / s.clamp_min(torch.finfo(dt).tiny), w0)
+        mu = (w * xj).sum(dim=1, keepdim=True)  # (B, 1, H, W)
+        var = (w * (xj - mu) ** 2).sum(dim=1, keepdim=True)
+        sigma = torch.maximum(var.clamp_min(0).sqrt(), floor)
+        p = torch.exp(-((y0 - mu) ** 2) / (2 * sigma**2)) * obs
+        q_new = (p >= tau) & obs
+        stop = early_exit and not bool((q_new != q).any())
+        q = q_new
+        if stop:
+            break
+    return q.to(dt), p
 
 
 def detect_singular(
@@ -145,6 +152,7 @@ def detect_singular(
     rounds: int = 3,
     *,
     return_confidence: bool = False,
+    backend: str = "auto",
 ) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
     """Credibility mask ``Q`` (1 = credible, 0 = singular or missing) from the matched blocks.
 
@@ -156,8 +164,13 @@ def detect_singular(
         matches: :class:`~torch_depth_sr.block_matching.BlockMatches` of ``x`` (``(B, k, H, W)``).
         sigma_floor: ``σ_floor > 0``, float or ``(B,)`` tensor, in the units of ``y`` (the noise level).
         tau: threshold on ``P`` in ``(0, 1]`` (0.5, i.e. ``|y − μ| ≤ 1.177 σ``).
-        rounds: maximum number of test rounds (≥ 1); stops early when ``Q`` stops changing.
+        rounds: number of test rounds (≥ 1). Once a round changes no pixel's ``Q`` the later ones would
+            change nothing either; on the CPU the test then stops early.
         return_confidence: also return the soft confidence ``P`` (0 at missing pixels).
+        backend: ``"numba"`` (the CPU kernel of :mod:`~torch_depth_sr.singular_kernel`), ``"torch"`` (tensor
+            operations, any device) or ``"auto"`` (numba for float CPU tensors when it is installed and
+            ``TORCH_DEPTH_SR_NO_NUMBA`` is unset, else torch). Both give the same ``Q`` and ``P`` up to
+            floating-point round-off.
 
     Returns:
         ``Q`` ``(B, 1, H, W)`` float {0, 1} in ``y``'s dtype, no gradient; with
@@ -186,6 +199,8 @@ def detect_singular(
         raise DepthSRError(f"tau must be in (0, 1]; got {tau!r}.")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise DepthSRError(f"rounds must be an int >= 1; got {rounds!r}.")
+    if backend not in ("auto", "numba", "torch"):
+        raise DepthSRError(f"backend must be 'auto', 'numba' or 'torch'; got {backend!r}.")
     b = y.shape[0]
     with torch.no_grad():
         dt = y.dtype if y.is_floating_point() else torch.float32
@@ -194,27 +209,15 @@ def detect_singular(
         floor = _as_batch(sigma_floor, "sigma_floor", b, yv)
         obs = (observed.detach() > 0) & torch.isfinite(yv)  # (B,1,H,W) bool
         y0 = torch.where(obs, yv, torch.zeros_like(yv))
-        fast = _detect_singular_c(y0, obs, xv, matches, floor, float(tau), rounds)
-        if fast is not None:
-            qf, p = fast
-            return (qf, p) if return_confidence else qf
-        xj = gather_neighbors(xv, matches.index)[:, 0]  # (B, k, H, W)
-        w0 = matches.weight.detach().to(dt)  # (B, k, H, W)
-        q = obs.clone()
-        p = torch.zeros_like(yv)
-        for _ in range(rounds):
-            qj = gather_neighbors(q.to(dt), matches.index)[:, 0]  # (B, k, H, W)
-            w = w0 * qj
-            s = w.sum(dim=1, keepdim=True)  # (B, 1, H, W)
-            w = torch.where(s > 0, w / s.clamp_min(torch.finfo(dt).tiny), w0)
-            mu = (w * xj).sum(dim=1, keepdim=True)  # (B, 1, H, W)
-            var = (w * (xj - mu) ** 2).sum(dim=1, keepdim=True)
-            sigma = torch.maximum(var.clamp_min(0).sqrt(), floor)
-            p = torch.exp(-((y0 - mu) ** 2) / (2 * sigma**2)) * obs
-            q_new = (p >= tau) & obs
-            changed = bool((q_new != q).any())
-            q = q_new
-            if not changed:
-                break
-        qf = q.to(dt)
+        kernel = None
+        if backend != "torch" and y0.device.type == "cpu" and dt in (torch.float32, torch.float64):
+            kernel = _numba_kernel()
+        if kernel is None and backend == "numba":
+            raise DepthSRError("backend='numba' needs CPU float32/float64 tensors and numba "
+                               f"({_KERNEL_FAILED or 'tensors on ' + str(y0.device) + ' in ' + str(dt)}).")
+        if kernel is not None:
+            qf, p = kernel(y0, obs, xv, matches.index, matches.weight, floor, float(tau), rounds)
+        else:
+            qf, p = _singular_torch(y0, obs, xv, matches, floor, float(tau), rounds)
     return (qf, p) if return_confidence else qf
+

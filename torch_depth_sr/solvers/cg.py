@@ -92,6 +92,8 @@ def conjugate_gradient(
     precond: Operator | None = None,
     tol: float = 1e-5,
     max_iter: int = 100,
+    *,
+    early_exit: bool = True,
 ) -> CGResult:
     r"""Batched preconditioned conjugate gradients for ``A x = b`` with ``A`` symmetric positive definite.
 
@@ -103,7 +105,9 @@ def conjugate_gradient(
 
     The loop is plain tensor code: under autograd it is differentiable (unrolled backpropagation);
     see :func:`torch_depth_sr.solvers.implicit.cg_solve` for the memory-flat implicit backward.
-    Each iteration synchronises once with the device (the all-converged test).
+    With ``early_exit`` (the default) each iteration synchronises once with the device (the all-converged
+    test); with ``early_exit=False`` exactly ``max_iter`` iterations run and nothing is read back to the host.
+    Converged samples are frozen either way, so both give the same result; only the work differs.
 
     Args:
         apply_A: function ``v ↦ A v`` on tensors of the shape of ``b``.
@@ -114,6 +118,8 @@ def conjugate_gradient(
         tol: relative tolerance on ``‖b − A x‖ / ‖b‖`` per sample. In float32 values below about
             ``1e-6`` are not reachable and the solve runs to ``max_iter``.
         max_iter: maximum number of iterations (``0`` returns ``x0``).
+        early_exit: stop once every sample has converged (a host synchronisation per iteration); False runs
+            ``max_iter`` iterations, for a fixed amount of work and a forward the host never waits on.
 
     Returns:
         :class:`CGResult` ``(x, iterations (B,), residual (B,), history)``.
@@ -128,6 +134,8 @@ def conjugate_gradient(
         (torch.Size([2]), True)
     """
     _check_inputs(b, x0, tol, max_iter)
+    if not isinstance(early_exit, bool):
+        raise DepthSRError(f"early_exit must be True or False; got {early_exit!r}.")
     batch = b.shape[0]
     b_norm = torch.linalg.vector_norm(b.flatten(1), dim=1)  # (B,)
     b_norm_safe = torch.where(b_norm > 0, b_norm, torch.ones_like(b_norm))
@@ -143,7 +151,7 @@ def conjugate_gradient(
     iterations = torch.zeros(batch, dtype=torch.long, device=b.device)
     history = [rel.detach().max() if batch else rel.new_zeros(())]
 
-    if max_iter > 0 and not bool(done.all()):
+    if max_iter > 0 and (not early_exit or not bool(done.all())):
         z = r if precond is None else _apply(precond, r, "precond")
         p = z
         rz = _bdot(r, z)  # (B,)
@@ -163,7 +171,7 @@ def conjugate_gradient(
             iterations = iterations + active.long()
             done = done | (rel <= tol)
             history.append(rel.detach().max())
-            if bool(done.all()):
+            if early_exit and bool(done.all()):
                 break
             z = r if precond is None else precond(r)
             rz_new = _bdot(r, z)

@@ -35,8 +35,8 @@ class _ImplicitCG(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, b, x0, settings, *params):  # type: ignore[override]
-        apply_A, precond, tol, max_iter, param_refs = settings
-        res = conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter)
+        apply_A, precond, tol, max_iter, param_refs, early_exit, _ = settings
+        res = conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter, early_exit=early_exit)
         x = res.x
         if x is x0 or x is b:  # never return an input object as an output
             x = x.clone()
@@ -48,13 +48,13 @@ class _ImplicitCG(torch.autograd.Function):
     @staticmethod
     @once_differentiable
     def backward(ctx, grad_x, *_unused):  # type: ignore[override]
-        apply_A, precond, tol, max_iter, param_refs = ctx.settings
+        apply_A, precond, tol, _, param_refs, _, backward_max_iter = ctx.settings
         (x,) = ctx.saved_tensors
         n_params = len(param_refs)
         if grad_x is None:
             return (None, None, None) + (None,) * n_params
         # g = A⁻¹ ḡ  (A symmetric)
-        g = conjugate_gradient(apply_A, grad_x, precond=precond, tol=tol, max_iter=max_iter).x
+        g = conjugate_gradient(apply_A, grad_x, precond=precond, tol=tol, max_iter=backward_max_iter).x
         grad_b = g if ctx.needs_input_grad[0] else None
         param_grads: list = [None] * n_params
         wanted = [i for i in range(n_params) if ctx.needs_input_grad[3 + i]]
@@ -77,6 +77,9 @@ def cg_solve(
     max_iter: int = 100,
     implicit: bool = True,
     params: Sequence[torch.Tensor] = (),
+    *,
+    early_exit: bool = True,
+    backward_max_iter: int | None = None,
 ) -> CGResult:
     r"""Solve ``A x = b`` (``A`` SPD) by batched CG, differentiable in ``b`` and in ``A``'s parameters.
 
@@ -104,6 +107,10 @@ def cg_solve(
         max_iter: maximum iterations of each solve.
         implicit: implicit-differentiation backward (``True``) or unrolled (``False``).
         params: tensors inside ``apply_A`` that should receive gradients (implicit mode).
+        early_exit: of the forward solve (see :func:`~torch_depth_sr.solvers.cg.conjugate_gradient`); False runs
+            ``max_iter`` iterations with no host synchronisation.
+        backward_max_iter: maximum iterations of the implicit backward's solve, which always stops at ``tol``
+            (default ``max_iter``).
 
     Returns:
         :class:`~torch_depth_sr.solvers.cg.CGResult`; only ``x`` carries gradient.
@@ -124,22 +131,25 @@ def cg_solve(
     needs_grad = torch.is_grad_enabled() and (
         (isinstance(b, torch.Tensor) and b.requires_grad) or any(p.requires_grad for p in params)
     )
+    backward_max_iter = max_iter if backward_max_iter is None else backward_max_iter
     if not implicit:
-        res = conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter)
+        res = conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter, early_exit=early_exit)
         if needs_grad and not res.x.requires_grad:
             # No CG step ran (the detached warm start already met ``tol``, or max_iter=0), so the unrolled
             # loop recorded no graph; x0 is the solution to tolerance, so differentiate it implicitly.
-            return _implicit(apply_A, b, x0, precond, tol, max_iter, params)
+            return _implicit(apply_A, b, x0, precond, tol, max_iter, params, early_exit, backward_max_iter)
         return res
     if not needs_grad:
         with torch.no_grad():
-            return conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter)
-    return _implicit(apply_A, b, x0, precond, tol, max_iter, params)
+            return conjugate_gradient(apply_A, b, x0=x0, precond=precond, tol=tol, max_iter=max_iter,
+                                      early_exit=early_exit)
+    return _implicit(apply_A, b, x0, precond, tol, max_iter, params, early_exit, backward_max_iter)
 
 
 def _implicit(apply_A: Operator, b: torch.Tensor, x0: torch.Tensor | None, precond: Operator | None, tol: float,
-              max_iter: int, params: tuple) -> CGResult:
+              max_iter: int, params: tuple, early_exit: bool = True, backward_max_iter: int | None = None) -> CGResult:
     x0_detached = x0.detach() if isinstance(x0, torch.Tensor) else x0
-    settings = (apply_A, precond, tol, max_iter, params)
+    settings = (apply_A, precond, tol, max_iter, params, early_exit,
+                max_iter if backward_max_iter is None else backward_max_iter)
     x, iterations, residual, history = _ImplicitCG.apply(b, x0_detached, settings, *params)
     return CGResult(x=x, iterations=iterations, residual=residual, history=history)

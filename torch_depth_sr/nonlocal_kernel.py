@@ -1,0 +1,112 @@
+"""The nonlocal terms of one layer (``nonlocal_prior.py``) in one pass over the matches: a numba kernel.
+
+For every pixel it reads the ``k`` matched centres once and returns the nonlocal gradient
+``α = Σ ω D x_j`` and the value prior's statistics ``x̄ = Σ ω x_j``, the weighted variance of the ``x_j``
+and the squared length of the weighted centroid offset. The torch path needs a ``(B, 3, k, H, W)``
+gather and ~15 passes over it. No gradient: the torch path serves whenever autograd needs one.
+
+Sums are in float64 (the torch path sums in the input dtype); the outputs agree with the torch path to
+the input dtype's round-off. With ``torch.get_num_threads() > 1`` pixels run in parallel (``numba.prange``),
+with one thread a serial copy of the loop runs (numba's thread pool, whose idle workers spin, is not woken).
+Compiled by LLVM at first use and cached on disk (``cache=True``).
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+import torch
+from numba import njit, prange
+
+__all__ = ["nonlocal_terms_cpu"]
+
+
+@njit(cache=True, fastmath=False)
+def _pixels(t0, t1, x, g, idx, wt, width, alpha, stats):
+    """α and the statistics of pixels ``[t0, t1)`` of the flattened batch.
+
+    ``x`` (B, HW), ``g`` (B, 2, HW), ``idx``/``wt`` (B, k, HW) → ``alpha`` (B, 2, HW), ``stats`` (B, 3, HW):
+    x̄, the weighted variance and the squared centroid offset. ``g`` and ``alpha`` have 0 channels when α is
+    not wanted.
+    """
+    k = idx.shape[1]
+    hw = idx.shape[2]
+    with_alpha = g.shape[1] == 2
+    xm = np.empty(k)  # the pixel's matched values and weights, read once
+    wm = np.empty(k)
+    for t in range(t0, t1):
+        n = t // hw
+        i = t - n * hw
+        row = i // width
+        col = i - row * width
+        xb = 0.0
+        oy = 0.0
+        ox = 0.0
+        for m in range(k):
+            j = idx[n, m, i]
+            wm[m] = wt[n, m, i]
+            xm[m] = x[n, j]
+            xb += wm[m] * xm[m]
+            jr = j // width
+            oy += wm[m] * (jr - row)
+            ox += wm[m] * (j - jr * width - col)
+        var = 0.0
+        for m in range(k):
+            d = xm[m] - xb
+            var += wm[m] * d * d
+        stats[n, 0, i] = xb
+        stats[n, 1, i] = var
+        stats[n, 2, i] = oy * oy + ox * ox
+        if with_alpha:
+            a0 = 0.0
+            a1 = 0.0
+            for m in range(k):
+                j = idx[n, m, i]
+                a0 += wm[m] * g[n, 0, j]
+                a1 += wm[m] * g[n, 1, j]
+            alpha[n, 0, i] = a0
+            alpha[n, 1, i] = a1
+
+
+_CHUNK = 4096  # pixels per parallel task
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def _terms_parallel(x, g, idx, wt, width, alpha, stats):
+    """:func:`_pixels` over every pixel of the batch, chunks of pixels in parallel."""
+    total = idx.shape[0] * idx.shape[2]
+    for c in prange((total + _CHUNK - 1) // _CHUNK):
+        _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, alpha, stats)
+
+
+def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: torch.Tensor):
+    """``(α or None, x̄, variance, squared centroid offset)`` of CPU float tensors, without gradient.
+
+    Args:
+        x: ``(B,1,H,W)`` float32/64. ``grad_x``: ``(B,2,H,W)`` ``D x``, or None (no α).
+        index, weight: ``(B,k,H,W)`` matches and their weights.
+
+    Returns:
+        α ``(B,2,H,W)`` (None without ``grad_x``), then x̄, variance, offset², each ``(B,1,H,W)``, in ``x``'s dtype.
+    """
+    b, _, h, w = x.shape
+    k = index.shape[1]
+    np_dt = np.float64 if x.dtype == torch.float64 else np.float32
+
+    def flat(t, shape, dtype):
+        return np.ascontiguousarray(t.detach().reshape(shape).numpy(), dtype=dtype)
+
+    xn = flat(x, (b, h * w), np_dt)
+    gn = flat(grad_x.to(x.dtype), (b, 2, h * w), np_dt) if grad_x is not None else np.zeros((b, 0, h * w), np_dt)
+    idxn = flat(index.to(torch.int64), (b, k, h * w), np.int64)
+    wn = flat(weight.to(x.dtype), (b, k, h * w), np_dt)
+    alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
+    stats = np.empty((b, 3, h * w), dtype=np_dt)
+    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    if threads > 1:
+        numba.set_num_threads(threads)
+        _terms_parallel(xn, gn, idxn, wn, w, alpha, stats)
+    else:  # on the calling thread: numba's thread pool, whose idle workers spin, is not woken
+        _pixels(0, b * h * w, xn, gn, idxn, wn, w, alpha, stats)
+    st = torch.from_numpy(stats).view(b, 3, h, w)
+    a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None
+    return a, st[:, 0:1], st[:, 1:2], st[:, 2:3]

@@ -1,0 +1,154 @@
+"""The rounds of the singular-pixel test (``singular.py``) as one numba kernel for the CPU.
+
+The torch path makes ~30 passes over ``(B, k, H, W)`` tensors per round; this kernel reads the ``k``
+matches of a pixel once per round and runs every round in one call. The rounds are Jacobi-style (round
+``r`` reads the ``Q`` of round ``r − 1`` only), so the result does not depend on the thread count. Two
+shortcuts change no result: after the first round only pixels with a matched centre whose ``Q`` changed
+in the previous round are recomputed (the others' statistics are unchanged), and a round in which no
+``Q`` changed ends the test. On the CPU neither costs a host synchronisation.
+
+With ``torch.get_num_threads() > 1`` the pixels of a round run in parallel (``numba.prange``); with one
+thread a serial copy of the loop runs, so numba's thread pool, whose idle workers spin, is not woken.
+
+Sums and the exponent are in float64 whatever the input dtype (the torch path sums in the input dtype),
+so in float32 ``P`` agrees with the torch path to float32 round-off and ``Q`` can differ only where ``P``
+lies within round-off of ``τ``. Compiled by LLVM at first use and cached on disk (``cache=True``).
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import torch
+from numba import njit, prange
+
+__all__ = ["singular_rounds_cpu"]
+
+
+@njit(cache=True, fastmath=False)
+def _pixels(i0, i1, first, y0, obs, x, idx, w0, floor_, tau, tiny, q_old, q_new, p, dirty_old, dirty_new):
+    """Q and P of pixels ``[i0, i1)`` of one sample in one round; returns how many changed Q.
+
+    ``y0, obs, x, q, p, dirty``: (HW,); ``idx, w0``: (k, HW). After the first round a pixel none of whose
+    matched centres changed Q in the previous round keeps its Q and P: its statistics would be the same.
+    """
+    k = idx.shape[0]
+    xm = np.empty(k)  # the pixel's matched values and renormalised weights, read once
+    wm = np.empty(k)
+    changed = 0
+    for i in range(i0, i1):
+        if not first:
+            stale = 0
+            for m in range(k):
+                stale |= dirty_old[idx[m, i]]
+            if stale == 0:
+                q_new[i] = q_old[i]
+                dirty_new[i] = 0
+                continue
+        if obs[i] == 0:
+            p[i] = 0.0
+            q_new[i] = 0.0
+            ch = q_old[i] != 0.0
+            dirty_new[i] = ch
+            changed += ch
+            continue
+        s = 0.0
+        for m in range(k):
+            j = idx[m, i]
+            xm[m] = x[j]
+            wm[m] = w0[m, i] * q_old[j]
+            s += wm[m]
+        if s > 0.0:
+            # clamping s at the dtype's smallest normal number keeps a subnormal s from giving 1/s = inf
+            # (as the torch path's clamp_min(tiny))
+            inv = 1.0 / max(s, tiny)
+            for m in range(k):
+                wm[m] *= inv
+        else:  # no matched centre is credible: all of them, with their original weights
+            for m in range(k):
+                wm[m] = w0[m, i]
+        mu = 0.0
+        for m in range(k):
+            mu += wm[m] * xm[m]
+        var = 0.0
+        for m in range(k):
+            d = xm[m] - mu
+            var += wm[m] * d * d
+        sigma = max(math.sqrt(max(var, 0.0)), floor_)
+        r = y0[i] - mu
+        pi = math.exp(-(r * r) / (2.0 * sigma * sigma))
+        qi = 1.0 if pi >= tau else 0.0
+        p[i] = pi
+        q_new[i] = qi
+        ch = qi != q_old[i]
+        dirty_new[i] = ch
+        changed += ch
+    return changed
+
+
+_CHUNK = 4096  # pixels per parallel task
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def _round_parallel(first, y0, obs, x, idx, w0, floor_, tau, tiny, q_old, q_new, p, dirty_old, dirty_new):
+    """One round for one sample, chunks of pixels in parallel; returns how many pixels changed Q."""
+    hw = idx.shape[1]
+    chunks = (hw + _CHUNK - 1) // _CHUNK
+    changed = 0
+    for c in prange(chunks):
+        changed += _pixels(c * _CHUNK, min(hw, (c + 1) * _CHUNK), first, y0, obs, x, idx, w0, floor_, tau, tiny,
+                           q_old, q_new, p, dirty_old, dirty_new)
+    return changed
+
+
+@njit(cache=True)
+def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, parallel, q, p):
+    """All rounds for every sample (arrays (B, HW) and (B, k, HW)); ``q`` holds Q⁰ on entry, Q on exit."""
+    b, hw = y0.shape
+    q_next = np.empty(hw, dtype=q.dtype)
+    dirty = np.zeros(hw, dtype=np.uint8)
+    dirty_next = np.zeros(hw, dtype=np.uint8)
+    for n in range(b):
+        for r in range(rounds):
+            if parallel:
+                changed = _round_parallel(r == 0, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, q[n],
+                                          q_next, p[n], dirty, dirty_next)
+            else:  # on the calling thread: numba's thread pool, whose idle workers spin, is not woken
+                changed = _pixels(0, hw, r == 0, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, q[n],
+                                  q_next, p[n], dirty, dirty_next)
+            q[n, :] = q_next
+            dirty, dirty_next = dirty_next, dirty
+            if changed == 0:
+                break
+
+
+def singular_rounds_cpu(y0: torch.Tensor, obs: torch.Tensor, x: torch.Tensor, index: torch.Tensor,
+                        weight: torch.Tensor, floor: torch.Tensor, tau: float, rounds: int):
+    """``(Q, P)`` of the singular test, each ``(B, 1, H, W)`` in ``y0``'s dtype, by the numba kernel.
+
+    Args:
+        y0: ``(B,1,H,W)`` float32/64 CPU observation, 0 where missing. ``obs``: ``(B,1,H,W)`` bool, measured.
+        x: ``(B,1,H,W)`` current estimate. ``index``/``weight``: ``(B,k,H,W)`` matches and their weights.
+        floor: ``(B,)`` (or broadcastable to it) σ floor; ``tau``: the threshold on P; ``rounds`` ≥ 1.
+    """
+    b, _, h, w = y0.shape
+    k = index.shape[1]
+    np_dt = np.float64 if y0.dtype == torch.float64 else np.float32
+
+    def flat(t, shape, dtype):
+        return np.ascontiguousarray(t.detach().reshape(shape).numpy(), dtype=dtype)
+
+    y0n = flat(y0, (b, h * w), np_dt)
+    xn = flat(x.to(y0.dtype), (b, h * w), np_dt)
+    obsn = flat(obs.to(torch.uint8), (b, h * w), np.uint8)
+    idxn = flat(index.to(torch.int64), (b, k, h * w), np.int64)
+    wn = flat(weight.to(y0.dtype), (b, k, h * w), np_dt)
+    fl = np.ascontiguousarray(floor.detach().reshape(-1).expand(b).double().numpy())
+    q = obsn.astype(np_dt)  # Q⁰ = measured (a fresh array: the inputs are never written)
+    p = np.zeros((b, h * w), dtype=np_dt)
+    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    if threads > 1:
+        numba.set_num_threads(threads)
+    _rounds(y0n, obsn, xn, idxn, wn, fl, float(tau), float(np.finfo(np_dt).tiny), int(rounds), threads > 1, q, p)
+    return torch.from_numpy(q).view(b, 1, h, w), torch.from_numpy(p).view(b, 1, h, w)
