@@ -239,7 +239,7 @@ with warnings.catch_warnings(record=True) as caught:
     a = block_match(d, rgb, None, block_size=3, search_window=7, k=4)
 r = block_match_reference(d, rgb, None, block_size=3, search_window=7, k=4)
 assert torch.equal(a.index, r.index) and torch.allclose(a.dist, r.dist)
-print("warnings", len([w for w in caught if "falls back to the torch path" in str(w.message)]))
+print("warnings", len([w for w in caught if "fall back to the torch path" in str(w.message)]))
 """
 
 
@@ -253,9 +253,8 @@ def test_without_numba_the_torch_path_runs_and_warns_once():
 
 
 def test_numba_backend_required_is_an_error_without_numba(monkeypatch):
-    import torch_depth_sr.block_matching.native as native
+    import torch_depth_sr.native as native
 
-    monkeypatch.setattr(native, "_KERNELS", None)
     monkeypatch.setattr(native, "_FAILED", "numba could not be imported (test)")
     with pytest.raises(DepthSRError, match="numba CPU kernels are unavailable"):
         block_match(torch.rand(1, 1, 12, 12), block_size=3, search_window=5, k=3, backend="numba")
@@ -343,3 +342,30 @@ def test_every_selection_of_the_torch_path_keeps_the_k_smallest(how, n, k):
 def test_unknown_selection_is_refused():
     with pytest.raises(DepthSRError, match="selection must be one of"):
         _smallest_keys(torch.zeros(1, 2, 500, dtype=torch.int64), 3, "heap")
+
+
+def test_numba_runs_on_the_workqueue_layer_unless_told_otherwise():
+    """A second OpenMP runtime beside torch's spins against it (torch_depth_sr/native.py): workqueue instead."""
+    import os
+
+    import numba
+
+    block_match(torch.rand(1, 1, 12, 12), block_size=3, search_window=5, k=3)
+    if "NUMBA_THREADING_LAYER" not in os.environ:
+        assert numba.config.THREADING_LAYER == "workqueue"
+
+
+def test_model_refine_rematching_stays_close_to_exact():
+    """The default re-matching (previous matches + a step-2 lattice) against the exact search in the model."""
+    from torch_depth_sr import DepthRestorer
+    from torch_depth_sr.evaluation.speed import make_inputs
+
+    y, rgb, gt = make_inputs(64, 80, 1, seed=3)
+    rmse = {}
+    for mode in ("exact", "refine"):
+        out = DepthRestorer(rematch=mode)(y, rgb)
+        rmse[mode] = float((out - gt).pow(2).mean().sqrt())
+    assert rmse["refine"] < float((y - gt)[y > 0].pow(2).mean().sqrt()) / 2  # it still restores
+    assert abs(rmse["refine"] - rmse["exact"]) <= 0.03 * rmse["exact"], rmse
+    with pytest.raises(Exception, match="rematch"):
+        DepthRestorer(rematch="patchmatch")

@@ -74,6 +74,11 @@ class RestorerConfig:
     temperature: float = 0.5  # h: weight temperature
     include_self: bool = False
     match_layers: tuple = (2, 5)  # layers that redo block matching on the current x (it always runs once on x⁰)
+    # how those layers match: "exact" searches the whole window again; "refine" re-ranks the previous matches
+    # and the offsets of a step-`rematch_lattice` lattice exactly (block_matching.refine_matches; ~2× cheaper,
+    # RMSE +0.3 % paper, +1.0 % sensor on four 2006 scenes; README "Speed")
+    rematch: str = "refine"
+    rematch_lattice: int = 2
     # nonlocal value prior (beyond the paper, which uses the matches for gradients only): η₃/2‖x − x̄‖² where x̄ is
     # the weighted mean of the matched centres' values, on pixels whose matched values agree (weighted variance
     # below nl_value_var σ̂²); 0 = off (issue 11)
@@ -298,6 +303,8 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "temperature": _positive,
     "include_self": _bool,
     "match_layers": _match_layers,
+    "rematch": _choice("exact", "refine"),
+    "rematch_lattice": _int(0),
     "singular_tau": _real(0.0, 1.0),
     "singular_sigma_floor": _positive,
     "singular_rounds": _int(1),

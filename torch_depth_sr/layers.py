@@ -26,7 +26,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from .block_matching import BlockMatches, block_match
+from .block_matching import BlockMatches, block_match, refine_matches
 from .config import RestorerConfig
 from .nonlocal_prior import nonlocal_terms, nonlocal_value_prior  # noqa: F401 (nonlocal_value_prior: re-export)
 from .operators import LinearOperator, grad, grad_adjoint, laplacian
@@ -111,17 +111,21 @@ class RestorationContext:
         return F.interpolate(v, scale_factor=s, mode="nearest") / (s * s)
 
 
-def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor) -> BlockMatches:
+def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor,
+                       previous: Optional[BlockMatches] = None) -> BlockMatches:
     """Block matching on the current estimate; untrusted pixels masked out of the depth distance.
 
     The weights ``softmax(−d/h)`` come with the matches, differentiable in the temperature ``h`` when it
-    requires grad; the search itself runs without gradient.
+    requires grad; the search itself runs without gradient. With ``previous`` matches and
+    ``config.rematch == "refine"`` only their offsets and a lattice of the window are re-ranked.
     """
     c = ctx.config
     trust = q.detach() if ctx.factor == 1 else None
-    return block_match(x.detach(), ctx.rgb, trust, block_size=c.block_size, search_window=c.search_window,
-                       k=c.k, color_weight=ctx.color_weight.detach(), temperature=ctx.temperature,
-                       include_self=c.include_self)
+    kw = dict(block_size=c.block_size, search_window=c.search_window, k=c.k,
+              color_weight=ctx.color_weight.detach(), temperature=ctx.temperature, include_self=c.include_self)
+    if previous is not None and c.rematch == "refine":
+        return refine_matches(x.detach(), previous, ctx.rgb, trust, **kw, reach=0, lattice=c.rematch_lattice)
+    return block_match(x.detach(), ctx.rgb, trust, **kw)
 
 
 def cg_iterations_for(c: RestorerConfig, index: int) -> Optional[int]:
@@ -172,7 +176,7 @@ class UnrolledLayer(nn.Module):
         dev = s.x.device
         if matches is not None and self.index in c.match_layers:
             with stage(s.timings, "block_matching", dev):
-                matches = run_block_matching(s.x, ctx, s.q)
+                matches = run_block_matching(s.x, ctx, s.q, previous=matches)
         value_prior = c.nl_value_weight > 0 and ctx.factor == 1 and matches is not None
         diag = target = None
         if c.use_nonlocal or value_prior:

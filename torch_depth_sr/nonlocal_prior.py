@@ -12,7 +12,6 @@ the torch path, a numba kernel on the CPU when no gradient is needed).
 """
 from __future__ import annotations
 
-import os
 from typing import Optional, Tuple
 
 import torch
@@ -20,6 +19,7 @@ import torch
 from ._checks import check_4d
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import ShapeError
+from .native import cpu_kernel
 
 __all__ = ["nonlocal_gradient", "nonlocal_terms", "nonlocal_value_prior"]
 
@@ -87,14 +87,8 @@ def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, 
 
 
 def _kernel():
-    """The numba kernel, or None where numba is missing or ``TORCH_DEPTH_SR_NO_NUMBA`` is set."""
-    if os.environ.get("TORCH_DEPTH_SR_NO_NUMBA", "") not in ("", "0"):
-        return None
-    try:
-        from .nonlocal_kernel import nonlocal_terms_cpu
-    except ImportError:  # the singular test's loader has already warned that numba is missing
-        return None
-    return nonlocal_terms_cpu
+    """The numba kernel, or None (see :mod:`torch_depth_sr.native`)."""
+    return cpu_kernel("nonlocal_kernel", "nonlocal_terms_cpu")
 
 
 def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: BlockMatches, *,

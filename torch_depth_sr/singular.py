@@ -22,8 +22,6 @@ matched centre is credible, the statistics use all ``k`` centres with their orig
 from __future__ import annotations
 
 import math
-import os
-import warnings
 from typing import Tuple, Union
 
 import torch
@@ -31,6 +29,7 @@ import torch
 from ._checks import check_4d, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError, ShapeError
+from .native import cpu_kernel
 
 __all__ = ["detect_singular", "neighbour_support"]
 
@@ -85,30 +84,9 @@ def neighbour_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
     return count * obs
 
 
-_KERNEL = None
-_KERNEL_FAILED = None  # why the numba kernel is unavailable (warned once)
-
-
 def _numba_kernel():
-    """:func:`~torch_depth_sr.singular_kernel.singular_rounds_cpu`, or None (warned once) without numba.
-
-    ``TORCH_DEPTH_SR_NO_NUMBA=1`` disables it, as it does block matching's kernels.
-    """
-    global _KERNEL, _KERNEL_FAILED
-    if _KERNEL is None and _KERNEL_FAILED is None:
-        if os.environ.get("TORCH_DEPTH_SR_NO_NUMBA", "") not in ("", "0"):
-            _KERNEL_FAILED = "TORCH_DEPTH_SR_NO_NUMBA is set"
-        else:
-            try:
-                from .singular_kernel import singular_rounds_cpu
-            except ImportError as exc:  # numba missing or broken for this numpy/python
-                _KERNEL_FAILED = f"numba could not be imported ({exc})"
-                warnings.warn(f"torch_depth_sr: {_KERNEL_FAILED}; the singular-pixel test on the CPU falls back to "
-                              "the torch path (same results, several times slower). `pip install numba` restores "
-                              "the fast path.", RuntimeWarning, stacklevel=3)
-            else:
-                _KERNEL = singular_rounds_cpu
-    return _KERNEL
+    """:func:`~torch_depth_sr.singular_kernel.singular_rounds_cpu`, or None (see :mod:`torch_depth_sr.native`)."""
+    return cpu_kernel("singular_kernel", "singular_rounds_cpu")
 
 
 def _singular_torch(y0, obs, xv, matches: BlockMatches, floor, tau: float, rounds: int, early_exit=None):
@@ -213,8 +191,8 @@ def detect_singular(
         if backend != "torch" and y0.device.type == "cpu" and dt in (torch.float32, torch.float64):
             kernel = _numba_kernel()
         if kernel is None and backend == "numba":
-            raise DepthSRError("backend='numba' needs CPU float32/float64 tensors and numba "
-                               f"({_KERNEL_FAILED or 'tensors on ' + str(y0.device) + ' in ' + str(dt)}).")
+            raise DepthSRError("backend='numba' needs CPU float32/float64 tensors and numba (got tensors on "
+                               f"{y0.device} in {dt}; numba {'missing or disabled' if _numba_kernel() is None else 'loaded'}).")
         if kernel is not None:
             qf, p = kernel(y0, obs, xv, matches.index, matches.weight, floor, float(tau), rounds)
         else:

@@ -23,7 +23,6 @@ Layout of the package:
 * ``torch_search.py`` — the exact search on any device, in torch (GPU; CPU when numba is missing);
 * ``refine.py`` — :func:`refine_matches`, the fast approximate search: candidates from a previous set of
   matches and from the neighbours' matches (PatchMatch propagation), re-ranked exactly;
-* ``native.py`` — the one loader of the compiled CPU kernels; warns once when it falls back to torch.
 
 Reference: Y. Yang et al., "depth maps restoration based on the sparse representation of nonlocal
 self-similarity" (the paper under ``shared/paper``), §II-B.
@@ -37,7 +36,7 @@ import torch
 from .._checks import check_4d
 from ..errors import DepthSRError, ShapeError
 from ._common import BlockMatches, Scalar, finish, prepare
-from .native import cpu_kernels
+from ..native import cpu_kernel
 from .reference import block_match_reference
 from .refine import refine_matches
 from .torch_search import block_match_torch
@@ -115,7 +114,8 @@ def block_match(
                                    or chunk_rows < 1):
         raise DepthSRError(f"chunk_rows must be None or an int >= 1; got {chunk_rows!r}.")
     on_cpu = depth.device.type == "cpu"
-    kernels = cpu_kernels(required=backend == "numba") if on_cpu and backend != "torch" else None
+    exact_cpu = (cpu_kernel("block_matching.cpu_exact", "block_match_cpu_exact", required=backend == "numba")
+                 if on_cpu and backend != "torch" else None)  # numba (torch_depth_sr.native loads it)
     if backend == "numba" and not on_cpu:
         raise DepthSRError(f"backend='numba' runs on the CPU; depth is on {depth.device}. Use 'auto' or 'torch'.")
     with torch.no_grad():
@@ -125,8 +125,8 @@ def block_match(
             rgb = rgb.to(depth.dtype)
         args = (depth, rgb, trust, block_size, search_window, k, rho.detach(), include_self, chunk_rows,
                 search_stride)
-        if kernels is not None:
-            dist, index = kernels.block_match_cpu_exact(*args)
+        if exact_cpu is not None:
+            dist, index = exact_cpu(*args)
         else:
             dist, index = block_match_torch(*args)
     return finish(dist.to(depth.device), index.to(depth.device), temp)

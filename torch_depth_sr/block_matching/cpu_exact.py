@@ -157,18 +157,18 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
             # rejection, is one compare on contiguous memory; only a better candidate touches the lists
             if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
                 row = i - h0
-                kr = kth[row]
+                kr, tdr, tir = kth[row], topd[row], topi[row]  # views made per row, not per insertion
                 for j in range(j0, j1):
-                    if dd[j] <= kr[j] and not (seeded and _listed(oid, topi[row], j)):
-                        _offer(dd[j], oid, topd[row], topi[row], j)
-                        kr[j] = topd[row, j, k - 1]
+                    if dd[j] <= kr[j] and not (seeded and _listed(oid, tir, j)):
+                        _offer(dd[j], oid, tdr, tir, j)
+                        kr[j] = tdr[j, k - 1]
             if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
                 row = i + dy - h0
-                kr = kth[row]
+                kr, tdr, tir = kth[row], topd[row], topi[row]
                 for j in range(j0, j1):
-                    if dd[j] <= kr[j + dx] and not (seeded and _listed(mid, topi[row], j + dx)):
-                        _offer(dd[j], mid, topd[row], topi[row], j + dx)
-                        kr[j + dx] = topd[row, j + dx, k - 1]
+                    if dd[j] <= kr[j + dx] and not (seeded and _listed(mid, tir, j + dx)):
+                        _offer(dd[j], mid, tdr, tir, j + dx)
+                        kr[j + dx] = tdr[j + dx, k - 1]
 
 
 @njit(cache=True, inline="always")

@@ -14,7 +14,7 @@ import torch
 
 from ..errors import DepthSRError, ShapeError
 from ._common import BlockMatches, Scalar, finish, prepare
-from .native import cpu_kernels
+from ..native import cpu_kernel
 
 __all__ = ["refine_matches"]
 
@@ -61,15 +61,15 @@ def refine_matches(
                          f"{tuple(depth.shape)} and k={k}.")
     if isinstance(reach, bool) or not isinstance(reach, int) or reach < 0:
         raise DepthSRError(f"reach must be an int >= 0; got {reach!r}.")
-    kernels = cpu_kernels() if depth.device.type == "cpu" else None
+    refine_cpu = cpu_kernel("block_matching.refine_cpu", "refine_cpu") if depth.device.type == "cpu" else None
     with torch.no_grad():
         trust = None if trust is None else trust.to(depth.dtype)
         rgb = None if rgb is None else rgb.to(depth.dtype)
-        if kernels is None:
+        if refine_cpu is None:
             from . import block_match
 
             return block_match(depth, rgb, trust, block_size, search_window, k, color_weight, temperature,
                                include_self)
-        dist, index = kernels.refine_cpu(depth, rgb, trust, previous.index, block_size, search_window, k,
+        dist, index = refine_cpu(depth, rgb, trust, previous.index, block_size, search_window, k,
                                          rho, include_self, reach, lattice)
     return finish(dist, index, temp)
