@@ -15,6 +15,7 @@ import torch
 from ..errors import DepthSRError, ShapeError
 from ._common import BlockMatches, Scalar, finish, prepare
 from ..native import cpu_kernel
+from .torch_search import block_match_torch
 
 __all__ = ["refine_matches"]
 
@@ -65,11 +66,10 @@ def refine_matches(
     with torch.no_grad():
         trust = None if trust is None else trust.to(depth.dtype)
         rgb = None if rgb is None else rgb.to(depth.dtype)
-        if refine_cpu is None:
-            from . import block_match
-
-            return block_match(depth, rgb, trust, block_size, search_window, k, color_weight, temperature,
-                               include_self)
+        if refine_cpu is None:  # the exact search in torch: what block_match does off the CPU or without numba
+            dist, index = block_match_torch(depth, rgb, trust, block_size, search_window, k, rho.detach(),
+                                            include_self, None, 1)
+            return finish(dist, index, temp)
         dist, index = refine_cpu(depth, rgb, trust, previous.index, block_size, search_window, k,
                                          rho, include_self, reach, lattice)
     return finish(dist, index, temp)

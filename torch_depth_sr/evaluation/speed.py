@@ -47,7 +47,7 @@ METHODS = ("full", "full-fast", "bm-exact", "bm-refine", "x0-filter", "jbf", "di
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
 DEFAULT_SKIP = ("full@1088x1376x8", "full-fast@1088x1376x8", "dictionary@1088x1376x8")
-STAGES = ("block_matching", "singular", "cg")
+STAGES = ("block_matching", "singular", "nonlocal", "cg")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -328,10 +328,12 @@ def run_speed(args) -> int:
              "peak MB": r.get("peak_mb"), "load": r["loadavg"][0] if r.get("loadavg") else None}
         st = r.get("stages")
         if st:
-            t.update({"bm": st["block_matching"], "singular": st["singular"], "cg": st["cg"], "rest": st["rest"],
+            t.update({"bm": st["block_matching"], "singular": st["singular"], "nonlocal": st["nonlocal"], "cg": st["cg"],
+                      "rest": st["rest"],
                       "cg it/layer": "/".join(str(i) for i in r["cg_iterations"])})
         table.append(t)
-    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "peak MB", "bm", "singular", "cg", "rest",
+    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "peak MB", "bm", "singular", "nonlocal", "cg",
+            "rest",
             "cg it/layer", "load"]
     meta = _metadata(device)
     meta.update(track="speed", threads=threads or torch.get_num_threads(), cpu_count=os.cpu_count(),
