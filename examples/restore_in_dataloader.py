@@ -12,7 +12,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from torch_depth_sr.datasets.synthetic import SyntheticScenes
-from torch_depth_sr.evaluation.protocols import SensorDegradation
+from torch_depth_sr.degradations import SensorDegradation
 from torch_depth_sr.transforms import Compose, RestoreDepth
 
 

@@ -60,7 +60,7 @@ class TestReaders:
 
 class TestProtocols:
     def test_same_seed_same_input_and_names_differ(self, root):
-        from torch_depth_sr.evaluation.protocols import make_degradation
+        from torch_depth_sr.degradations import make_degradation
 
         s = _scene(root, "paper", "Baby1").load()
         a, b = make_degradation("sensor")(s), make_degradation("sensor")(s)
@@ -69,7 +69,7 @@ class TestProtocols:
         assert not torch.equal(a["depth"], make_degradation("sensor")(other)["depth"])
 
     def test_paper_noise_level(self, root):
-        from torch_depth_sr.evaluation.protocols import make_degradation
+        from torch_depth_sr.degradations import make_degradation
 
         s = _scene(root, "paper", "Cloth1").load()
         d = make_degradation("paper")(s)
@@ -82,7 +82,7 @@ class TestProtocols:
 def test_full_beats_jbf_on_two_scenes(root, track):
     """Regression: the full model beats the tuned JBF on crops of two scenes never used for fitting."""
     from torch_depth_sr.evaluation.methods import run_method
-    from torch_depth_sr.evaluation.protocols import make_degradation
+    from torch_depth_sr.degradations import make_degradation
     from torch_depth_sr.metrics import rmse
 
     for name in ("Art", "Teddy"):

@@ -14,7 +14,7 @@ from .evaluation.report import metadata as _metadata, print_table as _print_tabl
 
 def cmd_demo(args) -> int:
     from .datasets.synthetic import make_scene
-    from .evaluation.protocols import SensorDegradation
+    from .degradations import SensorDegradation
     from .figures import comparison_figure
     from .fill import fill_holes
     from .metrics import mae, rmse

@@ -4,7 +4,7 @@ A transform takes a whole **sample** and returns a new one:
 
 * a ``dict`` — the keys ``"depth"``, ``"rgb"``, ``"gt"`` and ``"mask"`` are understood, every
   other key is passed through unchanged (spatial extras such as the region masks ``"holes"``,
-  ``"edges"`` of :mod:`torch_depth_sr.evaluation.protocols` are cropped along by
+  ``"edges"`` of :mod:`torch_depth_sr.degradations` are cropped along by
   :class:`RandomCrop`);
 * a ``tuple``/``list`` — read by position as ``(depth, rgb, gt, mask)``; missing or extra
   elements are allowed and extras pass through; the same type comes back;
@@ -132,7 +132,7 @@ def _fraction(v: Range, name: str) -> Tuple[float, float]:
 
 
 def _stable_hash(name) -> int:
-    from .evaluation.protocols import stable_hash
+    from .degradations import stable_hash
 
     return stable_hash(str(name))
 

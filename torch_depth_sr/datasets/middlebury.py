@@ -12,7 +12,7 @@ middlebury_eval3_half  im0.png / disp0GT.pfm   1 (float px, rows flipped)   +inf
 =====================  ======================  ===========================  =====================
 
 Each sample is a dict: ``depth`` (1,H,W) float32 (here a copy of the clean ground truth; the
-protocols in :mod:`torch_depth_sr.evaluation.protocols` replace it with a degraded input),
+protocols in :mod:`torch_depth_sr.degradations` replace it with a degraded input),
 ``rgb`` (3,H,W) in [0,1], ``gt`` (1,H,W) (0 = unknown), ``mask`` (1,H,W) (1 = gt known),
 ``scale`` (float), ``name`` (scene folder name, e.g. ``'Art'``), ``dataset``
 (e.g. ``'middlebury2005'``), ``year`` (int; 2014 for MiddEval3) and ``path`` (str).

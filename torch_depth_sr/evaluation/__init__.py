@@ -1,6 +1,6 @@
 """Evaluation: the degradations of the benchmark tracks (``shared/docs/benchmark.md``)."""
 
-from torch_depth_sr.evaluation.protocols import (
+from torch_depth_sr.degradations import (
     PROTOCOLS,
     PaperDegradation,
     SensorDegradation,

@@ -20,7 +20,7 @@ FACTORS = (2, 4, 8, 16)
 def _samples(track: str, root, scenes, sigma):
     """Yield degraded samples of a track (one per scene, or per scene and factor)."""
     from ..datasets.discover import find_scenes
-    from .protocols import make_degradation
+    from ..degradations import make_degradation
 
     records = find_scenes(root, track)
     if scenes:

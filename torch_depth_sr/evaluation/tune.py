@@ -27,7 +27,7 @@ def fitting_samples(crop: Optional[int], n_synthetic: int = 4, tracks=("paper", 
     from .._data_root import data_root
     from ..datasets.discover import find_scenes
     from ..datasets.synthetic import make_scene
-    from .protocols import make_degradation
+    from ..degradations import make_degradation
 
     out = []
     scenes = [r for r in find_scenes(data_root(), "paper") if r.year == 2006]

@@ -150,7 +150,7 @@ class CropDataset(Dataset):
         elif callable(track):
             crop = track(crop)
         elif track != "none":
-            from ..evaluation.protocols import make_degradation
+            from ..degradations import make_degradation
 
             crop = make_degradation(track, sigma=sigma, seed=dseed)(crop)
         d = crop["depth"]
