@@ -5,7 +5,7 @@ Runs the default model once with exact re-matching on the speed benchmark's inpu
 then, per layer, runs each candidate algorithm on exactly those inputs and reports the share of the exact
 ``k`` nearest blocks it recovers (recall), the mean kept distance relative to the exact one, and its time
 (median of ``--repeats``). The effect on accuracy is measured by the benchmark tracks with
-``--config '{"rematch": "exact"}'`` and the default (``"refine"``, lattice 3)::
+``--config '{"rematch": "exact"}'`` and the default (``"refine"``, lattice 2)::
 
     python -m torch_depth_sr.evaluation.matching_candidates --size 480 640
 """
@@ -31,8 +31,8 @@ CANDIDATES = {
     "exact (oracle)": dict(kind="exact"),
     "previous, re-scored (= kept as they are)": dict(kind="refine", reach=0, lattice=0),
     "previous + 4 neighbours' (PatchMatch propagation)": dict(kind="refine", reach=1, lattice=0),
-    "previous + lattice 2": dict(kind="refine", reach=0, lattice=2),
-    "previous + lattice 3 (default)": dict(kind="refine", reach=0, lattice=3),
+    "previous + lattice 2 (default)": dict(kind="refine", reach=0, lattice=2),
+    "previous + lattice 3": dict(kind="refine", reach=0, lattice=3),
     "previous + 4 neighbours' + lattice 3": dict(kind="refine", reach=1, lattice=3),
     "lattice 2 alone (search_stride=2)": dict(kind="stride", stride=2),
 }
