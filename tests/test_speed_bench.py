@@ -17,8 +17,15 @@ def test_make_inputs_shapes_and_holes():
 def test_measure_full_reports_stages_and_cg():
     row = measure("full", 24, 32, 1, repeats=1)
     assert row["repeats"] == 1 and row["seconds"] > 0
-    assert set(row["stages"]) == {"block_matching", "singular", "cg", "rest", "total"}
+    assert set(row["stages"]) == {"block_matching", "singular", "nonlocal", "cg", "rest", "total"}
     assert len(row["cg_iterations"]) == 8 and row["peak_mb"] is not None
+
+
+@pytest.mark.parametrize("method", ["bm-exact", "bm-refine", "x0-filter"])
+def test_measure_stage_rows(method):
+    """The stage rows of the speed track (issue 13 item 5) run the model's own stage on its inputs."""
+    row = measure(method, 24, 32, 1, repeats=1)
+    assert row["repeats"] == 1 and row["seconds"] > 0 and "stages" not in row
 
 
 def test_run_speed_in_process_writes_json_and_table(tmp_path, capsys):
