@@ -3,15 +3,22 @@
 TV + nonlocal self-similarity + sparse outliers with singular-pixel detection, solved by
 half-quadratic splitting; see ``DepthRestorer`` and ``restore_depth``.
 """
-from .block_matching import BlockMatches, block_match, block_match_reference
+from .block_matching import BlockMatches, block_match, gather_neighbors, refine_matches
 from .config import RestorerConfig
 from .errors import DepthSRError, DTypeError, InvalidDepthError, ModelFileError, ParameterError, ShapeError
 from .fill import fill_holes
+from .metrics import bad_pixel_rate, mae, rmse
 from .model import DepthRestorer, RestorationResult, restore_depth
 from .noise import estimate_noise_sigma
+from .nonlocal_prior import nonlocal_gradient, nonlocal_value_prior
+from .shrinkage import group_soft_threshold, soft_threshold
+from .singular import detect_singular
+from .solvers.cg import conjugate_gradient
+from .transforms import RestoreDepth
 
 __version__ = "0.1.0"
 
+# the unfold oracle block_matching.block_match_reference is for tests and stays in its module
 __all__ = [
     "BlockMatches",
     "DTypeError",
@@ -21,12 +28,23 @@ __all__ = [
     "ModelFileError",
     "ParameterError",
     "RestorationResult",
+    "RestoreDepth",
     "RestorerConfig",
     "ShapeError",
     "__version__",
+    "bad_pixel_rate",
     "block_match",
-    "block_match_reference",
+    "conjugate_gradient",
+    "detect_singular",
     "estimate_noise_sigma",
     "fill_holes",
+    "gather_neighbors",
+    "group_soft_threshold",
+    "mae",
+    "nonlocal_gradient",
+    "nonlocal_value_prior",
+    "refine_matches",
     "restore_depth",
+    "rmse",
+    "soft_threshold",
 ]

@@ -9,6 +9,8 @@ import torch
 
 from .errors import DTypeError, ParameterError, ShapeError
 
+__all__ = ["check_4d", "check_same_hw", "check_floating", "check_min_size", "check_noise_sigma", "check_scale_factor"]
+
 
 def check_4d(x: torch.Tensor, name: str, channels: int | Sequence[int] | None = None) -> None:
     """Raise ShapeError unless ``x`` is a ``(B, C, H, W)`` tensor with an allowed ``C``."""

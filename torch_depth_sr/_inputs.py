@@ -15,6 +15,8 @@ import torch
 
 from .errors import DTypeError, InvalidDepthError, ShapeError
 
+__all__ = ["DepthLayout", "native_array", "parse_depth", "parse_rgb", "restore_layout", "map_layout"]
+
 
 @dataclass(frozen=True)
 class DepthLayout:

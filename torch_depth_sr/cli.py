@@ -203,6 +203,8 @@ def main(argv=None) -> int:
 
 from .errors import describe_error, single_line as _single_line  # noqa: E402  (one home: errors.py)
 
+__all__ = ["cmd_demo", "RESTORE_HELP", "cmd_restore", "cmd_bench", "build_parser", "main"]
+
 
 def _check_device(name) -> None:
     """Refuse a device torch does not know or cannot use here, before any work."""

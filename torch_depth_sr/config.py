@@ -11,6 +11,8 @@ from typing import Any, Callable
 
 from .errors import ModelFileError, ParameterError
 
+__all__ = ["RestorerConfig", "load_config_file", "ABLATIONS", "PRESETS"]
+
 
 @dataclass
 class RestorerConfig:

@@ -8,6 +8,8 @@ import cv2
 import numpy as np
 import torch
 
+__all__ = ["depth_to_bgr", "error_to_bgr", "rgb_to_bgr", "mosaic", "write_png", "comparison_figure"]
+
 
 def _np2d(x) -> np.ndarray:
     if isinstance(x, torch.Tensor):

@@ -14,6 +14,8 @@ import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
 
+__all__ = ["fill_holes", "pull_push", "SidedFill", "fill_holes_sided"]
+
 
 def fill_holes(depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     r"""Fill the pixels where ``mask == 0`` by push-pull normalised convolution.

@@ -35,6 +35,19 @@ from .singular import detect_singular, neighbour_support
 from .solvers.dct import NeumannPreconditioner
 from .solvers.implicit import cg_solve
 
+__all__ = [
+    "RestorationState",
+    "stage",
+    "RestorationContext",
+    "run_block_matching",
+    "cg_iterations_for",
+    "UnrolledLayer",
+    "singular_test",
+    "supported_pixels",
+    "prior_weight",
+    "solve_x",
+]
+
 
 def _inv_softplus(v: float) -> float:
     v = float(v)

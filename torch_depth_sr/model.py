@@ -30,6 +30,16 @@ from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
 from .operators import BicubicDownsample, grad
 
+__all__ = [
+    "RestorationResult",
+    "DepthRestorer",
+    "SIDED_FILL_DEFAULTS",
+    "initial_estimate",
+    "FILL_MODES",
+    "upsample_initial",
+    "restore_depth",
+]
+
 
 class RestorationResult(NamedTuple):
     """Result of :func:`restore_depth` with ``return_details=True``.

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import torch
 
+__all__ = ["estimate_noise_sigma", "quantisation_step", "implausible", "depth_scale"]
+
 _MAD_TO_STD = 1.4826
 
 

@@ -23,6 +23,8 @@ from .datasets.io import DEPTH_SUFFIXES, depth_suffixes_for, read_depth_stored, 
     write_png_depth
 from .errors import DepthSRError, ModelFileError, UsageError
 
+__all__ = ["DEPTH_EXTS", "RGB_EXTS", "FORMATS_HELP", "Job", "DepthFilePairs", "plan_restore", "restore_paths"]
+
 DEPTH_EXTS = DEPTH_SUFFIXES
 RGB_EXTS = (".png", ".jpg", ".jpeg", ".ppm", ".bmp", ".tif", ".tiff")
 FORMATS_HELP = (".png (uint8 or uint16), .pfm (float32), .npy (any dtype), .tif/.tiff (what OpenCV stores: "

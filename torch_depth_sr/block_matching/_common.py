@@ -9,6 +9,8 @@ import torch
 from .._checks import check_4d, check_floating, check_same_hw
 from ..errors import DepthSRError, ShapeError
 
+__all__ = ["BlockMatches", "lattice", "prepare", "finish", "index_from_offsets", "offset_order", "symmetric_order"]
+
 Scalar = Union[float, torch.Tensor]
 
 class BlockMatches(NamedTuple):

@@ -14,6 +14,8 @@ from ..errors import UsageError
 from ..fill import fill_holes
 from .methods import DENOISE_METHODS, UPSAMPLE_METHODS, run_method
 
+__all__ = ["FACTORS", "run_bench", "summarise"]
+
 FACTORS = (2, 4, 8, 16)
 
 

@@ -26,6 +26,8 @@ from tqdm import tqdm
 from .._data_root import data_root
 from ..model import DepthRestorer
 
+__all__ = ["FITTING", "images", "degrade", "rmse_grey", "main"]
+
 # Middlebury files of the guided-SR set that are 2006 scenes (the fitting split; data README, section 4)
 FITTING = {"03", "04", "05", "09", "10", "11", "12", "19", "20", "28", "29"}
 

@@ -36,6 +36,18 @@ from pathlib import Path
 import numpy as np
 import torch
 
+__all__ = [
+    "HELD_OUT",
+    "SIDE_TOL",
+    "edge_sides",
+    "bridging",
+    "run_sensor",
+    "backproject",
+    "outlier_shares",
+    "run_real",
+    "main",
+]
+
 HELD_OUT = ("Art", "Books", "Dolls", "Laundry", "Moebius", "Reindeer", "Cones", "Teddy", "Tsukuba", "Venus")
 SIDE_TOL = 3.0  # grey levels
 

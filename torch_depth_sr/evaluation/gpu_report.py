@@ -30,6 +30,8 @@ from ..block_matching import block_match
 from ..model import DepthRestorer
 from . import speed
 
+__all__ = ["agreement", "matching_times", "selection_times", "profile", "main"]
+
 
 def _timed(fn, device: str, repeats: int) -> float:
     fn()

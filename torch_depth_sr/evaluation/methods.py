@@ -13,6 +13,16 @@ import torch
 
 from ..fill import fill_holes
 
+__all__ = [
+    "DENOISE_METHODS",
+    "UPSAMPLE_METHODS",
+    "JBF_PARAMS",
+    "JBU_PARAMS",
+    "DICTIONARY_PARAMS",
+    "RGF_PARAMS",
+    "run_method",
+]
+
 DENOISE_METHODS = ("input", "jbf", "rgf", "dictionary", "tv", "tv+nl", "full")
 UPSAMPLE_METHODS = ("bicubic", "jbf", "tv", "tv+nl", "full")
 

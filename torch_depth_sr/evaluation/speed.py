@@ -40,6 +40,18 @@ from typing import Optional
 
 import torch
 
+__all__ = [
+    "METHODS",
+    "SIZES",
+    "BATCHES",
+    "DEFAULT_SKIP",
+    "STAGES",
+    "make_inputs",
+    "measure_dataloader",
+    "measure",
+    "run_speed",
+]
+
 METHODS = ("full", "full-fast", "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.

@@ -23,6 +23,8 @@ from ..config import RestorerConfig
 from ..model import DepthRestorer
 from .tune import errors_by, fitting_samples
 
+__all__ = ["DEFAULT_CONFIGS", "accuracy", "timing", "main"]
+
 DEFAULT_CONFIGS = (
     {},
     {"search_window": 11, "match_layers": [2]},  # the "fast" preset

@@ -18,6 +18,8 @@ import torch
 from ..config import RestorerConfig
 from ..model import DepthRestorer
 
+__all__ = ["SEARCH", "fitting_samples", "errors_by", "score", "coordinate_search", "main"]
+
 SEARCH = ("singular_sigma_floor", "guided_prior", "lam", "eta", "mu2", "mu1", "gamma", "color_weight", "temperature")
 
 

@@ -12,6 +12,8 @@ import torch
 from ..baselines import joint_bilateral_filter
 from .tune import fitting_samples
 
+__all__ = ["main"]
+
 
 def main():
     samples = fitting_samples(160)

@@ -16,6 +16,8 @@ from tqdm import tqdm
 from ..baselines import rolling_guidance_filter
 from .tune import fitting_samples
 
+__all__ = ["main"]
+
 
 def main():
     samples = fitting_samples(None, n_synthetic=0)

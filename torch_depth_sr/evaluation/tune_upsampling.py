@@ -24,6 +24,8 @@ from ..config import RestorerConfig
 from ..model import DepthRestorer
 from .tune import errors_by
 
+__all__ = ["DEFAULT_TRIALS", "upsampling_fitting_samples", "score", "main"]
+
 DEFAULT_TRIALS = (
     {"upsample_scale": {}},
     {"upsample_scale": {"mu1": 3.0}},

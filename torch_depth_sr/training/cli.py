@@ -16,6 +16,8 @@ import sys
 
 from .train import TrainConfig
 
+__all__ = ["config_from_args", "cmd_train", "add_train_parser", "main"]
+
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
     d = TrainConfig()
