@@ -15,7 +15,7 @@ Each measurement is one warm-up call then the median of ``repeats`` timed calls.
 (method, size, batch) runs in its own fresh Python subprocess, so that its peak memory is honest:
 the child builds its inputs, resets the kernel's peak-RSS counter (``/proc/self/clear_refs`` ← 5),
 runs, and reports ``VmHWM − VmRSS`` at the reset, i.e. the peak resident memory the method added on
-top of its inputs (all allocators: torch, numpy, OpenCV, the C kernel). Where the reset is not
+top of its inputs (all allocators: torch, numpy, OpenCV, the numba kernels). Where the reset is not
 possible the absolute ``VmHWM`` is reported (``peak_kind = "process"``). On CUDA the figure is
 ``torch.cuda.max_memory_allocated``.
 
