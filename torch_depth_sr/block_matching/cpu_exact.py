@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from ._common import index_from_offsets, offset_order, symmetric_order
+from ._common import offset_order, symmetric_order
 
 __all__ = ["block_match_cpu_exact"]
 
@@ -201,36 +201,65 @@ def _pad(planes: torch.Tensor, r: int, big_r: int, dtype) -> np.ndarray:
     return np.ascontiguousarray(p.cpu().numpy())
 
 
-def block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride,
-                          seed=None):
-    """Exact top-k block matches ``(dist, index)``, each (B, k, H, W), by the numba kernel.
+@njit(cache=True, parallel=True)
+def _finalize(topd, topi, big_r, dist, index):
+    """Working lists (B, H, W, k) of distances and offset ids → ``dist`` and flat ``index``, each (B, k, H, W)."""
+    bsz, h, w, k = topd.shape
+    s = 2 * big_r + 1
+    for n in prange(bsz * h):
+        b = n // h
+        i = n % h
+        for j in range(w):
+            for m in range(k):
+                oid = topi[b, i, j, m]
+                dist[b, m, i, j] = topd[b, i, j, m]
+                index[b, m, i, j] = (i + oid // s - big_r) * w + (j + oid % s - big_r)
 
-    ``seed = (topd, topi)`` (numpy (B, H, W, k), sorted, offset ids) starts the lists from those candidates
-    (e.g. re-scored previous matches) instead of empty; they are updated in place and returned.
-    """
-    bsz, _, h, w = depth.shape
-    r, big_r = block_size // 2, search_window // 2
+
+def finalize(topd: np.ndarray, topi: np.ndarray, search_window: int) -> tuple:
+    """``(dist, index)`` tensors (B, k, H, W) from the kernels' working lists (one parallel pass, no copies in torch)."""
+    bsz, h, w, k = topd.shape
+    dist = np.empty((bsz, k, h, w), dtype=topd.dtype)
+    index = np.empty((bsz, k, h, w), dtype=np.int64)
+    _finalize(topd, topi, search_window // 2, dist, index)
+    return torch.from_numpy(dist), torch.from_numpy(index)
+
+
+def padded_planes(depth, rgb, trust, r: int, big_r: int):
+    """``(xp, tp, cp, use_t)``: the numpy planes the kernels read (see :func:`_band`)."""
+    bsz = depth.shape[0]
     dt = torch.float64 if depth.dtype == torch.float64 else torch.float32
     xp = _pad(depth.detach(), r, big_r, dt)[:, 0]
     use_t = trust is not None
     tp = _pad(trust.detach(), r, big_r, dt)[:, 0] if use_t else np.zeros((bsz, 1, 1), xp.dtype)
     cp = _pad(rgb.detach(), r, big_r, dt) if rgb is not None else np.zeros((bsz, 0, 1, 1), xp.dtype)
+    return xp, tp, cp, use_t
+
+
+def search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, seeded):
+    """Run the exact search over the offsets of the ``stride`` lattice into the working lists ``topd/topi``
+    (B, H, W, k); with ``seeded`` they start from the candidates already in them."""
+    xp, tp, cp, use_t = planes
+    bsz = xp.shape[0]
+    r, big_r = block_size // 2, search_window // 2
     order, both = symmetric_order(offset_order(search_window, stride, include_self), search_window)
     # taller bands share more of each mirrored pair's rows; at least one band per thread
     rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads()))))
     bands = [(b, h0, min(h, h0 + rows)) for b in range(bsz) for h0 in range(0, h, rows)]
     samples, starts, ends = (np.array(v, dtype=np.int64) for v in zip(*bands))
-    if seed is None:
-        topd = np.empty((bsz, h, w, k), dtype=xp.dtype)
-        topi = np.empty((bsz, h, w, k), dtype=np.int32)
-    else:
-        topd, topi = seed
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
                       dtype=xp.dtype)
     use_torch_threads()
-    _all_bands(xp, tp, cp, use_t, h, w, r, big_r, order, both, consts, samples, starts, ends, topd, topi,
-               seed is not None)
-    dist = torch.from_numpy(topd).permute(0, 3, 1, 2).to(depth.dtype).contiguous()
-    index = index_from_offsets(torch.from_numpy(topi).permute(0, 3, 1, 2), search_window, h, w)
-    return dist, index.contiguous()
+    _all_bands(xp, tp, cp, use_t, h, w, r, big_r, order, both, consts, samples, starts, ends, topd, topi, seeded)
+
+
+def block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride):
+    """Exact top-k block matches ``(dist, index)``, each (B, k, H, W), by the numba kernel."""
+    bsz, _, h, w = depth.shape
+    planes = padded_planes(depth, rgb, trust, block_size // 2, search_window // 2)
+    topd = np.empty((bsz, h, w, k), dtype=planes[0].dtype)
+    topi = np.empty((bsz, h, w, k), dtype=np.int32)
+    search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, False)
+    dist, index = finalize(topd, topi, search_window)
+    return dist.to(depth.dtype), index

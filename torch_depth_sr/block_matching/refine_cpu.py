@@ -8,53 +8,60 @@ is computed directly over the block (same formula as the exact search) and kept 
 from __future__ import annotations
 
 import numpy as np
-import torch
 from numba import njit, prange
 
-from ._common import index_from_offsets
-from .cpu_exact import _ID_NONE, _listed, _offer, _pad, block_match_cpu_exact, use_torch_threads
+from .cpu_exact import _ID_NONE, _listed, _offer, finalize, padded_planes, search, use_torch_threads
 
 __all__ = ["refine_cpu"]
 
 
 @njit(cache=True, inline="always")
-def _block_distance(xp, tp, cp, use_t, ya, xa, yb, xb, bs, crho, nb):
-    """d(i, j) for blocks whose top-left corners are (ya, xa) and (yb, xb) in the padded planes."""
-    num = 0.0
-    cnt = 0.0
-    col = 0.0
-    nc = cp.shape[0]
+def _block_distance(xp, tp, cp, use_t, ya, xa, yb, xb, bs, crho, inb):
+    """d(i, j) for blocks whose top-left corners are (ya, xa) and (yb, xb) in the padded planes.
+
+    Accumulates in the planes' dtype (float32 stays float32, like the exact kernel); ``crho``, ``inb`` too.
+    """
+    zero = xp[ya, xa] - xp[ya, xa]
+    num = zero
+    cnt = zero
+    col = zero
     for u in range(bs):
+        xa_row = xp[ya + u]
+        xb_row = xp[yb + u]
         for v in range(bs):
-            df = xp[ya + u, xa + v] - xp[yb + u, xb + v]
+            df = xa_row[xa + v] - xb_row[xb + v]
             if use_t:
                 tt = tp[ya + u, xa + v] * tp[yb + u, xb + v]
-                num += tt * df * df
+                num += tt * (df * df)
                 cnt += tt
             else:
                 num += df * df
-            for c in range(nc):
-                dc = cp[c, ya + u, xa + v] - cp[c, yb + u, xb + v]
+    for c in range(cp.shape[0]):
+        for u in range(bs):
+            ca = cp[c, ya + u]
+            cb = cp[c, yb + u]
+            for v in range(bs):
+                dc = ca[xa + v] - cb[xb + v]
                 col += dc * dc
-    d = num / max(cnt, 1.0) if use_t else num / nb
+    one = zero + 1
+    d = num / max(cnt, one) if use_t else num * inb
     d += crho * col
-    return d if d > 0 else 0.0
+    return d if d > zero else zero
 
 
 @njit(cache=True, parallel=True)
-def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, rho, topd, topi):
+def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi):
     """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none)."""
     bsz = xp.shape[0]
     bs = 2 * r + 1
     s = 2 * big_r + 1
-    nc = cp.shape[1]
-    nb = float(bs * bs)
     kp = prev.shape[1]
     centre = big_r * s + big_r
     for n in prange(bsz * big_h):
         b = n // big_h
         i = n % big_h
-        crho = rho[b] / (nc * nb) if nc > 0 else 0.0
+        crho = consts[b, 0]
+        inb = consts[b, 1]
         xb, tb, cb = xp[b], tp[b], cp[b]  # views made once per row: inside the pixel loop they would cost
         td = topd[b, i]
         ti = topi[b, i]
@@ -87,7 +94,7 @@ def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self
                     if src > 0 and _listed(oid, ti, j):
                         continue
                     d = _block_distance(xb, tb, cb, use_t, big_r + i, big_r + j, big_r + i + dy, big_r + j + dx,
-                                        bs, crho, nb)
+                                        bs, crho, inb)
                     _offer(d, oid, td, ti, j)
 
 
@@ -96,21 +103,16 @@ def refine_cpu(depth, rgb, trust, previous_index, block_size, search_window, k, 
     and (``lattice > 0``) the offsets of the search window on a lattice of that step."""
     bsz, _, h, w = depth.shape
     r, big_r = block_size // 2, search_window // 2
-    dt = torch.float64 if depth.dtype == torch.float64 else torch.float32
-    # the direct distance needs only the block halo r: pad by r (replicate) then R (zeros) like the exact kernel
-    xp = _pad(depth.detach(), r, big_r, dt)[:, 0]
-    use_t = trust is not None
-    tp = _pad(trust.detach(), r, big_r, dt)[:, 0] if use_t else np.zeros((bsz, 1, 1), xp.dtype)
-    cp = _pad(rgb.detach(), r, big_r, dt) if rgb is not None else np.zeros((bsz, 0, 1, 1), xp.dtype)
+    planes = padded_planes(depth, rgb, trust, r, big_r)  # shared by the re-scoring and the lattice search
+    xp, tp, cp, use_t = planes
     prev = previous_index.detach().cpu().contiguous().numpy()
     topd = np.empty((bsz, h, w, k), dtype=xp.dtype)
     topi = np.empty((bsz, h, w, k), dtype=np.int32)
-    rho_np = np.asarray(rho.detach().cpu().double().numpy(), dtype=np.float64)
+    nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
+    consts = np.array([[rb / (nc * nb), 1.0 / nb] for rb in rho.detach().cpu().double().tolist()], dtype=xp.dtype)
     use_torch_threads()
-    _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), rho_np, topd, topi)
+    _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi)
     if lattice > 0:
-        block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, None, lattice,
-                              seed=(topd, topi))
-    dist = torch.from_numpy(topd).permute(0, 3, 1, 2).to(depth.dtype).contiguous()
-    index = index_from_offsets(torch.from_numpy(topi).permute(0, 3, 1, 2), search_window, h, w)
-    return dist, index.contiguous()
+        search(planes, h, w, block_size, search_window, rho, include_self, None, lattice, topd, topi, True)
+    dist, index = finalize(topd, topi, search_window)
+    return dist.to(depth.dtype), index
