@@ -16,3 +16,35 @@ def scene():
     holes = torch.rand(gt.shape, generator=g) < 0.05
     noisy = torch.where(holes | (gt <= 0), torch.zeros_like(noisy), noisy.clamp_min(1.0))
     return {"depth": noisy, "rgb": s["rgb"][None], "gt": gt, "mask": s["mask"][None]}
+
+
+def pytest_addoption(parser):
+    parser.addoption("--device", action="store", default="cpu",
+                     help="device of the device/dtype-parametrised tests (cpu, cuda, cuda:1, ...)")
+    parser.addoption("--dtype", action="store", default="float32,float64",
+                     help="comma-separated dtypes of the device/dtype-parametrised tests")
+
+
+_TOLERANCES = {torch.float32: dict(rtol=1e-5, atol=1e-5), torch.float64: dict(rtol=1e-10, atol=1e-12)}
+
+
+def pytest_generate_tests(metafunc):
+    """Tests that take ``float_dtype`` run once per dtype of ``--dtype``."""
+    if "float_dtype" in metafunc.fixturenames:
+        names = [n.strip() for n in metafunc.config.getoption("--dtype").split(",") if n.strip()]
+        metafunc.parametrize("float_dtype", [getattr(torch, n) for n in names], ids=names)
+
+
+@pytest.fixture
+def device(request) -> torch.device:
+    """The device named by ``--device``; skips when it is not available here."""
+    d = torch.device(request.config.getoption("--device"))
+    if d.type == "cuda" and not torch.cuda.is_available():
+        pytest.skip(f"--device {d} asked for, but CUDA is not available")
+    return d
+
+
+@pytest.fixture
+def tolerance(float_dtype) -> dict:
+    """``assert_close`` tolerances for ``float_dtype`` (float32 looser than float64)."""
+    return _TOLERANCES[float_dtype]
