@@ -6,7 +6,7 @@ import torch
 from torch_depth_sr import DepthRestorer
 from torch_depth_sr.block_matching import BlockMatches
 from torch_depth_sr.datasets.synthetic import make_scene
-from torch_depth_sr.layers import nonlocal_value_prior
+from torch_depth_sr.nonlocal_prior import nonlocal_value_prior
 
 
 def test_weights_only_where_the_matched_values_agree():

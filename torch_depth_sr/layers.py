@@ -28,7 +28,7 @@ from torch import nn
 
 from .block_matching import BlockMatches, block_match, refine_matches
 from .config import RestorerConfig
-from .nonlocal_prior import nonlocal_terms, nonlocal_value_prior  # noqa: F401 (nonlocal_value_prior: re-export)
+from .nonlocal_prior import nonlocal_terms
 from .operators import LinearOperator, grad, grad_adjoint, laplacian
 from .shrinkage import group_soft_threshold, soft_threshold
 from .singular import detect_singular, neighbour_support
@@ -105,7 +105,7 @@ class RestorationContext:
     grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
     fill_confident: Optional[torch.Tensor] = None  # (B,1,h,w) {0,1}: measured, or a hole filled from a clear side
     # (B,1,h,w) bool: measured pixels with enough agreeing measured neighbours (config.singular_support), which
-    # the singular test always trusts; depends on y only, so it is computed once per forward (supported_pixels)
+    # the singular test always trusts; depends on y only, so the first test computes it (supported_pixels)
     supported: Optional[torch.Tensor] = None
 
     degradation: Optional[LinearOperator] = None  # K when factor > 1 (None: area averaging)
@@ -225,7 +225,7 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
         q, conf = detect_singular(ctx.y, x.detach(), ctx.observed, matches, sigma_floor=c.singular_sigma_floor,
                                   tau=c.singular_tau, rounds=c.singular_rounds, return_confidence=True)
         if c.singular_support > 0:
-            if ctx.supported is None:
+            if ctx.supported is None:  # depends on y only: computed by the first layer's test, kept for the rest
                 ctx.supported = supported_pixels(ctx)
             supported = ctx.supported
             q = torch.where(supported, ctx.observed.to(q.dtype), q)

@@ -24,8 +24,7 @@ from .config import ABLATIONS, PRESETS, RestorerConfig, load_config_file
 from .errors import DepthSRError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .fill import fill_holes
-from .layers import (RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage,
-                     supported_pixels)
+from .layers import RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage
 from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
 from .operators import BicubicDownsample, grad
@@ -177,8 +176,6 @@ class DepthRestorer(nn.Module):
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp(),
                                  grid_step=grid_step,
                                  degradation=BicubicDownsample(factor) if c.degradation == "bicubic" else None)
-        if c.use_singular and factor == 1 and c.singular_support > 0:
-            ctx.supported = supported_pixels(ctx)  # depends on y only: once per forward, not per layer
         # colour-guided estimate, every pixel; holes at depth gaps filled from one side (fill_holes_sided)
         guided, ctx.fill_confident, _ = initial_estimate(yn, observed, guide, factor, c, return_fill=True)
         keep = c.init_keep_observed and guided is not None

@@ -17,9 +17,12 @@ import os
 import warnings
 from typing import Callable, Optional
 
+import numpy as np
+import torch
+
 from .errors import DepthSRError
 
-__all__ = ["cpu_kernel", "numba_disabled"]
+__all__ = ["as_numpy", "cpu_kernel", "kernel_threads", "numba_disabled"]
 
 _FAILED: Optional[str] = None  # why numba is unavailable, once known
 _CONFIGURED = False
@@ -67,3 +70,18 @@ def cpu_kernel(module: str, name: str, required: bool = False) -> Optional[Calla
     if required:
         raise DepthSRError(f"the numba CPU kernels are unavailable: {_FAILED}. Use backend='auto' or 'torch'.")
     return None
+
+
+def kernel_threads() -> int:
+    """Set numba's parallel loops to torch's thread count (``torch.set_num_threads``, capped at numba's) and
+    return it; the kernels run a serial loop on the calling thread when it is 1."""
+    import numba
+
+    n = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(n)
+    return n
+
+
+def as_numpy(t: torch.Tensor, shape, dtype) -> np.ndarray:
+    """A C-contiguous numpy array of a CPU tensor, reshaped and cast (no copy when nothing needs to change)."""
+    return np.ascontiguousarray(t.detach().reshape(shape).numpy(), dtype=dtype)

@@ -7,15 +7,16 @@ gather and ~15 passes over it. No gradient: the torch path serves whenever autog
 
 Sums are in float64 (the torch path sums in the input dtype); the outputs agree with the torch path to
 the input dtype's round-off. With ``torch.get_num_threads() > 1`` pixels run in parallel (``numba.prange``),
-with one thread a serial copy of the loop runs (numba's thread pool, whose idle workers spin, is not woken).
+with one thread a serial copy of the loop runs on the calling thread.
 Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 import torch
 from numba import njit, prange
+
+from .native import as_numpy, kernel_threads
 
 __all__ = ["nonlocal_terms_cpu"]
 
@@ -91,21 +92,15 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: tor
     b, _, h, w = x.shape
     k = index.shape[1]
     np_dt = np.float64 if x.dtype == torch.float64 else np.float32
-
-    def flat(t, shape, dtype):
-        return np.ascontiguousarray(t.detach().reshape(shape).numpy(), dtype=dtype)
-
-    xn = flat(x, (b, h * w), np_dt)
-    gn = flat(grad_x.to(x.dtype), (b, 2, h * w), np_dt) if grad_x is not None else np.zeros((b, 0, h * w), np_dt)
-    idxn = flat(index.to(torch.int64), (b, k, h * w), np.int64)
-    wn = flat(weight.to(x.dtype), (b, k, h * w), np_dt)
+    xn = as_numpy(x, (b, h * w), np_dt)
+    gn = as_numpy(grad_x.to(x.dtype), (b, 2, h * w), np_dt) if grad_x is not None else np.zeros((b, 0, h * w), np_dt)
+    idxn = as_numpy(index.to(torch.int64), (b, k, h * w), np.int64)
+    wn = as_numpy(weight.to(x.dtype), (b, k, h * w), np_dt)
     alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
     stats = np.empty((b, 3, h * w), dtype=np_dt)
-    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
-    if threads > 1:
-        numba.set_num_threads(threads)
+    if kernel_threads() > 1:
         _terms_parallel(xn, gn, idxn, wn, w, alpha, stats)
-    else:  # on the calling thread: numba's thread pool, whose idle workers spin, is not woken
+    else:  # on the calling thread: no hand-off to numba's thread pool
         _pixels(0, b * h * w, xn, gn, idxn, wn, w, alpha, stats)
     st = torch.from_numpy(stats).view(b, 3, h, w)
     a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None

@@ -8,7 +8,7 @@ in the previous round are recomputed (the others' statistics are unchanged), and
 ``Q`` changed ends the test. On the CPU neither costs a host synchronisation.
 
 With ``torch.get_num_threads() > 1`` the pixels of a round run in parallel (``numba.prange``); with one
-thread a serial copy of the loop runs, so numba's thread pool, whose idle workers spin, is not woken.
+thread a serial copy of the loop runs on the calling thread.
 
 Sums and the exponent are in float64 whatever the input dtype (the torch path sums in the input dtype),
 so in float32 ``P`` agrees with the torch path to float32 round-off and ``Q`` can differ only where ``P``
@@ -18,10 +18,11 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import torch
 from numba import njit, prange
+
+from .native import as_numpy, kernel_threads
 
 __all__ = ["singular_rounds_cpu"]
 
@@ -114,7 +115,7 @@ def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, parallel, q, p):
             if parallel:
                 changed = _round_parallel(r == 0, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, q[n],
                                           q_next, p[n], dirty, dirty_next)
-            else:  # on the calling thread: numba's thread pool, whose idle workers spin, is not woken
+            else:  # on the calling thread: no hand-off to numba's thread pool
                 changed = _pixels(0, hw, r == 0, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, q[n],
                                   q_next, p[n], dirty, dirty_next)
             q[n, :] = q_next
@@ -135,20 +136,14 @@ def singular_rounds_cpu(y0: torch.Tensor, obs: torch.Tensor, x: torch.Tensor, in
     b, _, h, w = y0.shape
     k = index.shape[1]
     np_dt = np.float64 if y0.dtype == torch.float64 else np.float32
-
-    def flat(t, shape, dtype):
-        return np.ascontiguousarray(t.detach().reshape(shape).numpy(), dtype=dtype)
-
-    y0n = flat(y0, (b, h * w), np_dt)
-    xn = flat(x.to(y0.dtype), (b, h * w), np_dt)
-    obsn = flat(obs.to(torch.uint8), (b, h * w), np.uint8)
-    idxn = flat(index.to(torch.int64), (b, k, h * w), np.int64)
-    wn = flat(weight.to(y0.dtype), (b, k, h * w), np_dt)
+    y0n = as_numpy(y0, (b, h * w), np_dt)
+    xn = as_numpy(x.to(y0.dtype), (b, h * w), np_dt)
+    obsn = as_numpy(obs.to(torch.uint8), (b, h * w), np.uint8)
+    idxn = as_numpy(index.to(torch.int64), (b, k, h * w), np.int64)
+    wn = as_numpy(weight.to(y0.dtype), (b, k, h * w), np_dt)
     fl = np.ascontiguousarray(floor.detach().reshape(-1).expand(b).double().numpy())
     q = obsn.astype(np_dt)  # Q⁰ = measured (a fresh array: the inputs are never written)
     p = np.zeros((b, h * w), dtype=np_dt)
-    threads = max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS))
-    if threads > 1:
-        numba.set_num_threads(threads)
-    _rounds(y0n, obsn, xn, idxn, wn, fl, float(tau), float(np.finfo(np_dt).tiny), int(rounds), threads > 1, q, p)
+    parallel = kernel_threads() > 1
+    _rounds(y0n, obsn, xn, idxn, wn, fl, float(tau), float(np.finfo(np_dt).tiny), int(rounds), parallel, q, p)
     return torch.from_numpy(q).view(b, 1, h, w), torch.from_numpy(p).view(b, 1, h, w)

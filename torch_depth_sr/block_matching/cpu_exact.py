@@ -13,11 +13,11 @@ Bands of rows run in parallel (``numba.prange``; threads: ``numba.set_num_thread
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
 import torch
 from numba import njit, prange
 
+from ..native import kernel_threads
 from ._common import offset_order, symmetric_order
 
 __all__ = ["block_match_cpu_exact"]
@@ -189,11 +189,6 @@ def _all_bands(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, s
               topd[b, h0:h1], topi[b, h0:h1], seeded)
 
 
-def use_torch_threads() -> None:
-    """Run numba's parallel loops on as many threads as torch uses (``torch.set_num_threads``)."""
-    numba.set_num_threads(max(1, min(torch.get_num_threads(), numba.config.NUMBA_NUM_THREADS)))
-
-
 def _pad(planes: torch.Tensor, r: int, big_r: int, dtype) -> np.ndarray:
     """(B, C, H, W) → numpy (B, C, H+2r+2R, W+2r+2R): replicate by r, then zeros by R."""
     p = torch.nn.functional.pad(planes.to(dtype), (r,) * 4, mode="replicate")
@@ -250,7 +245,7 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
                       dtype=xp.dtype)
-    use_torch_threads()
+    kernel_threads()
     _all_bands(xp, tp, cp, use_t, h, w, r, big_r, order, both, consts, samples, starts, ends, topd, topi, seeded)
 
 

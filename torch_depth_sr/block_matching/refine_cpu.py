@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .cpu_exact import _ID_NONE, _listed, _offer, finalize, padded_planes, search, use_torch_threads
+from ..native import kernel_threads
+from .cpu_exact import _ID_NONE, _listed, _offer, finalize, padded_planes, search
 
 __all__ = ["refine_cpu"]
 
@@ -110,7 +111,7 @@ def refine_cpu(depth, rgb, trust, previous_index, block_size, search_window, k, 
     topi = np.empty((bsz, h, w, k), dtype=np.int32)
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / (nc * nb), 1.0 / nb] for rb in rho.detach().cpu().double().tolist()], dtype=xp.dtype)
-    use_torch_threads()
+    kernel_threads()
     _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi)
     if lattice > 0:
         search(planes, h, w, block_size, search_window, rho, include_self, None, lattice, topd, topi, True)
