@@ -309,7 +309,7 @@ class TestRefine:
         true_d = self._true_dist(x2, c, t, got.index, self.kw["color_weight"]).to(got.dist)
         torch.testing.assert_close(got.dist, true_d, rtol=1e-4, atol=1e-5)
         assert bool((got.dist[:, 1:] >= got.dist[:, :-1]).all())
-        rescored = refine_matches(x2, prev, c, t, **self.kw, reach=0)
+        rescored = refine_matches(x2, prev, c, t, **self.kw, reach=0, lattice=0)
         assert bool((got.dist <= rescored.dist + 1e-5).all())  # a superset of candidates: never worse
         assert bool((got.dist >= exact.dist - 1e-5).all())  # and never better than the exact search
         srt = got.index.sort(dim=1).values

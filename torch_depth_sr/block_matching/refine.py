@@ -2,9 +2,10 @@
 
 The unrolled model matches blocks on x⁰ and again on later estimates of the same scene. Between two
 passes the estimate changes by a denoising step, and so do the matches, but mostly among blocks that
-were already good candidates for the pixel or for its neighbours. :func:`refine_matches` therefore
-re-ranks, exactly, only those candidates: the previous matches of the pixel and of its four neighbours
-at distance ``reach`` (taken at the same offset), about ``5k`` distances per pixel instead of ``S²``.
+were already good candidates. :func:`refine_matches` therefore re-ranks, exactly, only some candidates:
+the previous matches of the pixel (and, with ``reach > 0``, of its four neighbours at that distance, taken
+at the same offset) and the window's offsets on a lattice of step ``lattice`` (searched by the exact kernel,
+seeded with the re-scored previous matches). The defaults (``reach = 0``, ``lattice = 2``) are the model's.
 """
 from __future__ import annotations
 
@@ -32,14 +33,15 @@ def refine_matches(
     temperature: Scalar = 1.0,
     include_self: bool = False,
     *,
-    reach: int = 1,
-    lattice: int = 0,
+    reach: int = 0,
+    lattice: int = 2,
 ) -> BlockMatches:
-    """The ``k`` best blocks among the previous matches of each pixel and of its neighbours.
+    """The ``k`` best blocks among the previous matches and the offsets of a lattice of the window.
 
     Same distance, arguments and result as :func:`~torch_depth_sr.block_matching.block_match`; the
-    candidates are the offsets of ``previous`` at the pixel and at its 4 neighbours ``reach`` pixels
-    away (``reach = 0``: the pixel's own previous matches only), restricted to the search window. The
+    candidates are the offsets of ``previous`` at the pixel (and at its 4 neighbours ``reach`` pixels away
+    when ``reach > 0``) and, with ``lattice > 0``, every offset of the window whose ``dy`` and ``dx`` are
+    multiples of ``lattice``, restricted to the search window. The
     result is the exact top-``k`` of those candidates, so it is never worse than the previous matches
     re-scored on ``depth``. On the CPU a numba kernel runs; elsewhere (or without numba) the exact
     search runs instead (a GPU does it fast).
