@@ -89,6 +89,10 @@ def run_bench(args) -> int:
         from .speed import run_speed
 
         return run_speed(args)
+    if args.track == "gdsr":
+        from .gdsr import run_gdsr
+
+        return run_gdsr(args)
     root = Path(args.data) if args.data else data_root()
     upsampling = args.track in ("upsample-a", "upsample-b")
     methods = args.methods or list(UPSAMPLE_METHODS if upsampling else DENOISE_METHODS)
