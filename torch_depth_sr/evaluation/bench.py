@@ -92,7 +92,7 @@ def run_bench(args) -> int:
     if args.track == "gdsr":
         from .gdsr import run_gdsr
 
-        return run_gdsr(args)
+        return run_gdsr(args, config=_parse_config(getattr(args, "config", None)))
     root = Path(args.data) if args.data else data_root()
     upsampling = args.track in ("upsample-a", "upsample-b")
     methods = args.methods or list(UPSAMPLE_METHODS if upsampling else DENOISE_METHODS)

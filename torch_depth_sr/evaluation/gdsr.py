@@ -163,14 +163,13 @@ def _check(args) -> tuple[list[str], list[int], list[float], list[str]]:
     return list(dict.fromkeys(sets)), list(dict.fromkeys(scales)), list(dict.fromkeys(noises)), methods
 
 
-def run_gdsr(args) -> int:
-    """``bench --track gdsr``: see the module docstring."""
+def run_gdsr(args, config: Optional[dict] = None) -> int:
+    """``bench --track gdsr``: see the module docstring. ``config``: RestorerConfig overrides for ``full``
+    (``bench`` passes its checked ``--config``)."""
     from .._data_root import data_root
-    from .bench import _parse_config
     from .report import metadata, print_table
 
     sets, scales, noises, methods = _check(args)
-    config = _parse_config(getattr(args, "config", None))
     root = Path(args.data) if args.data else data_root()
     device = getattr(args, "device", "cpu") or "cpu"
     present = [d for d in sets if (root / FOLDER / d).is_dir()]
