@@ -6,11 +6,13 @@ for each trial (a JSON dict of ``RestorerConfig`` overrides; default: the defaul
 images, and the images that are not Middlebury 2006 fitting scenes) and on how many images each trial is
 worse than bicubic.
 
-Protocol (``../shared/docs/benchmark.md``, track ``gdsr``, grey-level sets only): crop to a multiple of the
-scale, antialiased bicubic downsampling (torch's, which reproduces Pillow's), optional Gaussian noise of
-``noise`` on a 0–255 scale of the image's range, RMSE over all pixels after clipping to [0, 255]. Input
-values at or below 0 (bicubic overshoot, noise) are missing for the model, as in ``bench``. This is a
-check of the frozen model, not the ``gdsr`` benchmark track of issue 14 (no NYU/RGB-D-D, no deep networks).
+Protocol (``../shared/docs/benchmark.md``, track ``gdsr``, grey-level sets only), the same code as the track
+(:mod:`torch_depth_sr.evaluation.gdsr`, readers in :mod:`torch_depth_sr.datasets.gdsr`): crop to a multiple of the
+scale, Pillow's antialiased bicubic downsampling, optional Gaussian noise of ``noise`` on a 0–255 scale of the
+image's range (seeded per image), bicubic = Pillow's bicubic upsampling, RMSE over all pixels after clipping to
+[0, 255]. Input values at or below 0 (bicubic overshoot, noise) are missing for the model, as in ``bench``. This
+is a check of the frozen model (default ``RestorerConfig`` plus the trials); ``bench --track gdsr`` is the
+benchmark.
 """
 from __future__ import annotations
 
@@ -20,51 +22,34 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from tqdm import tqdm
 
 from .._data_root import data_root
+from ..datasets.gdsr import FITTING, gdsr_images
 from ..model import DepthRestorer
+from .gdsr import add_noise, bicubic as _bicubic, crop_to_multiple, degrade as _degrade_image, resize_pillow, rmse
 
 __all__ = ["FITTING", "images", "degrade", "rmse_grey", "main"]
 
-# Middlebury files of the guided-SR set that are 2006 scenes (the fitting split; data README, section 4)
-FITTING = {"03", "04", "05", "09", "10", "11", "12", "19", "20", "28", "29"}
-
 
 def images(root: Path, dataset: str, only: list[str] | None = None):
-    """Yield ``(name, depth float32 (H,W), rgb uint8 (H,W,3))`` of one grey-level set, sorted by name."""
-    import cv2
-
-    folder = root / "guided_dsr_testsets_dctnet" / dataset
-    if not folder.is_dir():
-        raise FileNotFoundError(f"{folder} not found; set TORCH_DEPTH_SR_DATA to the shared data folder")
-    for p in sorted((folder / "Depth").glob("*_output_depth.png")):
-        index = p.name.split("_")[1]
-        if only and index not in only:
-            continue
-        depth = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-        depth = (depth[..., 0] if depth.ndim == 3 else depth).astype(np.float32)
-        colour = sorted((folder / "RGB").glob(f"{p.name.split('_')[0]}_{index}_*"))  # Lu's files say "ouput"
-        if len(colour) != 1:
-            raise FileNotFoundError(f"expected one colour image for {p.name} in {folder / 'RGB'}; found {colour}")
-        rgb = cv2.imread(str(colour[0]))[..., ::-1]
-        yield f"{dataset}_{index}", depth, np.ascontiguousarray(rgb)
+    """Yield ``(name, depth float32 (H,W), rgb uint8 (H,W,3))`` of one grey-level set, sorted by name
+    (:func:`torch_depth_sr.datasets.gdsr.gdsr_images`)."""
+    for img in gdsr_images(root, dataset, only):
+        yield img.name, img.depth, img.rgb
 
 
 def degrade(gt: torch.Tensor, s: int, noise: float, seed: int = 0):
-    """Crop ``gt (1,1,H,W)`` to a multiple of ``s``; return it, the low-resolution input and bicubic back up."""
-    h, w = gt.shape[-2] // s * s, gt.shape[-1] // s * s
-    gt = gt[..., :h, :w]
-    lr = F.interpolate(gt, size=(h // s, w // s), mode="bicubic", antialias=True, align_corners=False)
-    if noise > 0:
-        g = torch.Generator().manual_seed(seed)
-        lr = lr + noise * float(gt.max() - gt.min()) / 255 * torch.randn(lr.shape, generator=g)
-    return gt, lr, F.interpolate(lr, scale_factor=s, mode="bicubic", align_corners=False)
+    """Crop ``gt (1,1,H,W)`` to a multiple of ``s``; return it, the low-resolution input and bicubic back up
+    (the ``gdsr`` protocol's resampling; noise drawn from a generator named by ``seed``)."""
+    gt = crop_to_multiple(gt, s)
+    h, w = gt.shape[-2:]
+    lr = add_noise(resize_pillow(gt, (h // s, w // s)), noise, float(gt.max() - gt.min()), f"clean_upsampling/{seed}")
+    return gt, lr, _bicubic(lr, (h, w))
 
 
 def rmse_grey(p: torch.Tensor, gt: torch.Tensor) -> float:
-    return float((p.clamp(0, 255) - gt.clamp(0, 255)).square().mean().sqrt())
+    return rmse(p, gt, "Middlebury")
 
 
 def main(argv=None) -> int:
@@ -82,15 +67,16 @@ def main(argv=None) -> int:
     root = Path(args.data) if args.data else data_root()
     rows = []
     for dataset in args.sets:
-        for name, depth, rgb in tqdm(list(images(root, dataset, args.images)), desc=dataset, unit="image"):
-            gt, lr, bicubic = degrade(torch.from_numpy(depth)[None, None], args.scale, args.noise)
-            h, w = gt.shape[-2:]
-            guide = torch.from_numpy(rgb[:h, :w].copy()).permute(2, 0, 1)[None].float() / 255
+        for img in tqdm(list(gdsr_images(root, dataset, args.images)), desc=dataset, unit="image"):
+            sample = _degrade_image(img, args.scale, args.noise)
+            gt, lr, guide = sample["gt"], sample["lr"], sample["rgb"]
+            bicubic = _bicubic(lr, tuple(gt.shape[-2:]))
+            name = img.name
             with torch.no_grad():
                 # the bicubic overshoot can make dark-edge inputs negative: missing for the model (as in `bench`)
                 lr_model = torch.where(lr > 0, lr, torch.full_like(lr, float("nan")))
                 errs = [rmse_grey(bicubic, gt)] + [rmse_grey(m(lr_model, guide), gt) for m in models]
-            held_out = not (dataset == "Middlebury" and name.split("_")[1] in FITTING)
+            held_out = img.heldout
             rows.append((name, held_out, errs))
             print(f"{name:16s} " + "  ".join(f"{e:7.3f}" for e in errs), flush=True)
     print(f"\nx{args.scale}, noise {args.noise}; columns: " + " | ".join(labels))
