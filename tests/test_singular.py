@@ -190,3 +190,22 @@ def test_subnormal_weight_sum_gives_no_nan(dtype):
         assert torch.isfinite(p).all(), path
     if "numba" in out:
         torch.testing.assert_close(out["numba"][1], out["torch"][1])
+
+
+def test_line_support_keeps_thin_structures_and_rejects_flying_and_impulse_pixels():
+    from torch_depth_sr.singular import line_support
+
+    y = torch.full((1, 1, 9, 12), 100.0)
+    y[..., 5:] = 40.0  # an edge between two surfaces at column 5
+    y[..., :, 2] = 10.0  # a one-pixel gap showing the background, from the top to the bottom border
+    y[..., 3, 4], y[..., 4, 4] = 70.0, 71.0  # two agreeing flying pixels between the sides of the edge
+    y[..., 6, 8] = 250.0  # an impulse
+    y[..., 2, 10] = 60.0  # a lone pixel inside a surface: not a chain
+    obs = torch.ones_like(y)
+    got = line_support(y, obs, 2.0)[0, 0]
+    assert bool(got[:, 2].all())  # the whole gap, both ends included
+    assert not bool(got[3, 4]) and not bool(got[4, 4]) and not bool(got[6, 8]) and not bool(got[2, 10])
+    assert not bool(got[:, [0, 1, 3]].any()) and not bool(got[:, 5:].any())  # wide surfaces: not lines
+    obs[..., 4, 2] = 0  # a missing pixel breaks the chain but both halves are still lines
+    got = line_support(y, obs, 2.0)[0, 0]
+    assert bool(got[:4, 2].all()) and bool(got[5:, 2].all()) and not bool(got[4, 2])

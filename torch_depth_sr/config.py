@@ -96,6 +96,9 @@ class RestorerConfig:
     # paper's test). Edges of clean maps match no block well and failed the test (issue 12).
     singular_support: int = 3
     singular_support_tol: float = 3.0
+    # ... and so does a pixel on a chain of three agreeing pixels whose value lies beyond its disagreeing
+    # neighbours' (a one-pixel gap or wire; a flying pixel lies between the sides of its edge)
+    singular_line_support: bool = True
     singular_gate: float = 0.002  # a sample whose share of gross failures is below this keeps Q = measured (0 = off)
     # do no harm: trusted measured pixels end within c·σ_excess of their measurement, σ_excess the noise beyond
     # quantisation (0 on a clean map), c = fidelity_band (0 = off); see fidelity.py
@@ -312,6 +315,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "singular_rounds": _int(1),
     "singular_support": _int(0),
     "singular_support_tol": _positive,
+    "singular_line_support": _bool,
     "singular_gate": _real(0.0, 1.0, lo_open=False),
     "fidelity_band": _real(0.0, lo_open=False),
     "cg_fixed_iters": _cg_fixed_iters,

@@ -31,7 +31,7 @@ from .config import RestorerConfig
 from .nonlocal_prior import nonlocal_terms
 from .operators import LinearOperator, grad, grad_adjoint, laplacian
 from .shrinkage import group_soft_threshold, soft_threshold
-from .singular import detect_singular, neighbour_support
+from .singular import detect_singular, line_support, neighbour_support
 from .solvers.dct import NeumannPreconditioner
 from .solvers.implicit import cg_solve
 
@@ -243,14 +243,18 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
 
 
 def supported_pixels(ctx: RestorationContext) -> torch.Tensor:
-    """Measured pixels with at least ``singular_support`` measured 8-neighbours within the tolerance, (B,1,h,w)."""
+    """Measured pixels with at least ``singular_support`` measured 8-neighbours within the tolerance, or on a
+    thin line of agreeing pixels (``singular_line_support``), (B,1,h,w)."""
     c = ctx.config
     with torch.no_grad():
         # y is in units of the scale, which is the noise σ̂ unless a floor of the scale policy took over
         tol = torch.as_tensor(c.singular_support_tol, dtype=ctx.y.dtype, device=ctx.y.device)
         if ctx.grid_step is not None:  # neighbours one grid step apart lie on the same surface (slanted, clean)
             tol = torch.maximum(tol, 1.01 * ctx.grid_step.to(ctx.y))
-        return neighbour_support(ctx.y, ctx.observed, tol) >= c.singular_support
+        supported = neighbour_support(ctx.y, ctx.observed, tol) >= c.singular_support
+        if c.singular_line_support:
+            supported = supported | line_support(ctx.y, ctx.observed, tol)
+        return supported
 
 
 def prior_weight(ctx: RestorationContext, q: torch.Tensor) -> torch.Tensor:

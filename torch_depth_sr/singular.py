@@ -31,7 +31,7 @@ from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError, ShapeError
 from .native import cpu_kernel
 
-__all__ = ["detect_singular", "neighbour_support"]
+__all__ = ["detect_singular", "neighbour_support", "line_support"]
 
 
 def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
@@ -82,6 +82,69 @@ def neighbour_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
             near = op[..., dy:dy + h, dx:dx + w] & ((yp[..., dy:dy + h, dx:dx + w] - yv).abs() <= tol_t)
             count = count + near.to(yv.dtype)
     return count * obs
+
+
+_OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0))
+
+
+def _shifted(t: torch.Tensor, dy: int, dx: int, fill) -> torch.Tensor:
+    """``t`` moved so that pixel ``i`` holds its neighbour ``i + (dy, dx)``; ``fill`` outside the image."""
+    h, w = t.shape[-2:]
+    padded = torch.nn.functional.pad(t, (1, 1, 1, 1), value=fill)
+    return padded[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+
+
+def line_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torch.Tensor]) -> torch.Tensor:
+    """Measured pixels on a thin structure, ``(B,1,H,W)`` bool: part of a chain of three or more agreeing pixels
+    whose value does not lie between the values of its disagreeing neighbours.
+
+    :func:`neighbour_support` asks for three agreeing 8-neighbours; a surface one pixel wide (a gap between
+    two objects that shows the background, a wire) has two, its end one, and fails that test although it is
+    measured as consistently as any surface. A flying pixel lies *between* the two sides of its edge and an
+    impulse floats alone; neither is a chain whose value lies beyond its surroundings. Here a pixel is on a
+    line when it agrees (within ``tol``) with a neighbour and one of the two has a second agreeing neighbour,
+    its value lies two tolerances or more beyond the minimum or maximum of its measured disagreeing
+    neighbours, and on two
+    opposite sides it has a disagreeing neighbour (or the image's end, not on both).
+
+    Examples:
+        >>> y = torch.full((1, 1, 7, 7), 50.0); y[0, 0, :, 3] = 10.0  # a one-pixel gap showing the background
+        >>> y[0, 0, 1, 5] = 30.0  # a lone pixel between the sides: not a line
+        >>> s = line_support(y, torch.ones_like(y), 1.0)
+        >>> bool(s[0, 0, 0, 3]), bool(s[0, 0, 3, 3]), bool(s[0, 0, 1, 5])
+        (True, True, False)
+    """
+    check_4d(y, "y", channels=1)
+    check_same_hw(y, observed, "y", "observed")
+    b = y.shape[0]
+    tol_t = torch.as_tensor(tol, dtype=y.dtype, device=y.device).reshape(-1)
+    tol_t = tol_t.expand(b).view(b, 1, 1, 1) if tol_t.numel() == 1 else tol_t.view(b, 1, 1, 1)
+    obs = (observed > 0) & torch.isfinite(y)
+    yv = torch.where(obs, y, torch.zeros_like(y))
+    agree, apart, count = {}, {}, torch.zeros_like(yv)
+    lo = torch.full_like(yv, math.inf)
+    hi = torch.full_like(yv, -math.inf)
+    for dy, dx in _OFFSETS:
+        yn, on = _shifted(yv, dy, dx, 0.0), _shifted(obs, dy, dx, False)
+        a = on & ((yn - yv).abs() <= tol_t) & obs
+        other = on & ~a
+        lo = torch.where(other, torch.minimum(lo, yn), lo)
+        hi = torch.where(other, torch.maximum(hi, yn), hi)
+        agree[dy, dx] = a
+        # a disagreeing neighbour, or the image's end (a line may run along the border)
+        apart[dy, dx] = other | _shifted(torch.zeros_like(obs), dy, dx, True)
+        count = count + a.to(yv.dtype)
+    chain = count >= 2  # the middle of a chain
+    for (dy, dx), a in agree.items():  # the end of a chain: an agreeing neighbour in its middle
+        chain = chain | (a & _shifted(count >= 2, dy, dx, False))
+    # clearly beyond (two tolerances: a flying pixel near one side of its edge is not); none (lo = inf) is beyond
+    beyond = (yv <= lo - 2 * tol_t) | (yv >= hi + 2 * tol_t)
+    # thin: other surfaces on two opposite sides (a flying pixel beside a hole has a surface on one side only)
+    between = torch.zeros_like(obs)
+    for dy, dx in _OFFSETS[:4]:
+        between = between | (apart[dy, dx] & apart[-dy, -dx] & (_shifted(obs, dy, dx, False) | _shifted(obs, -dy, -dx, False)))
+    thin = count <= 2  # more agreeing neighbours make a surface (neighbour_support's case), not a line
+    return chain & thin & beyond & between & obs
 
 
 def _numba_kernel():
