@@ -12,7 +12,8 @@ import torch
 from torch_depth_sr._data_root import require_data_root
 from torch_depth_sr.cli import main
 from torch_depth_sr.datasets.gdsr import FITTING, SETS, GDSRImage, gdsr_images, list_names, resolve_set
-from torch_depth_sr.evaluation.gdsr import add_noise, bicubic, crop_to_multiple, degrade, resize_pillow, rmse
+from torch_depth_sr.evaluation.gdsr import (_run_model, add_noise, bicubic, crop_to_multiple, degrade, make_model,
+                                            resize_pillow, rmse)
 
 # ---------------------------------------------------------------- an independent Pillow bicubic (NumPy, float64)
 
@@ -184,12 +185,31 @@ def test_bicubic_reproduces_an_independent_computation():
 # ---------------------------------------------------------------- the command
 
 
-def test_cli_rows(tmp_path, capsys):
+def test_models_run_on_the_protocols_input():
+    """``full`` on a small synthetic sample: output on the ground truth's grid, finite, and the
+    ``--config`` overrides reach ``full`` on top of the bicubic K."""
+    img = _image(64, 64)
+    img.depth[:8, :8] = 0.0  # a dark corner: bicubic overshoot below 0 is missing for the model
+    s = degrade(img, 4, 5.0)
+    full = make_model("full", 4, {"num_layers": 2, "match_layers": [1]})
+    assert full.config.degradation == "bicubic" and full.config.num_layers == 2
+    out = _run_model(full, s, "cpu")
+    assert out.shape == s["gt"].shape and torch.isfinite(out).all()
+    assert make_model("trained", 4) is not None  # upsample-x4 ships
+    assert make_model("trained", 16) is None  # nothing ships for x16
+
+
+def test_cli_rows(tmp_path, capsys, monkeypatch):
+    """The command's rows and summary on one small image at x16. The model's forward is replaced by bicubic
+    here (it is exercised above); everything else is the command as it runs."""
+    import torch_depth_sr.evaluation.gdsr as track
+
     require_data_root("guided_dsr_testsets_dctnet/Middlebury")
+    monkeypatch.setattr(track, "_run_model", lambda model, s, device: bicubic(s["model_lr"], s["gt"].shape[-2:]) + 0.5)
     out = tmp_path / "g.json"
     assert main(["bench", "--track", "gdsr", "--sets", "Middlebury", "--scenes", "30", "--scales", "16",
                  "--noise", "0", "5", "--methods", "bicubic", "full", "trained", "--json", str(out),
-                 "--config", '{"num_layers": 2, "match_layers": [1]}']) == 0  # a 2-layer full: quick
+                 "--config", '{"num_layers": 2, "match_layers": [1]}']) == 0
     data = json.loads(out.read_text())
     rows = data["results"]
     assert len(rows) == 6
