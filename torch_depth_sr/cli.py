@@ -154,7 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
                    choices=["paper", "sensor", "upsample-a", "upsample-b", "real", "speed", "gdsr"])
     b.add_argument("--data", default=None, help="data root (default: $TORCH_DEPTH_SR_DATA or ../shared/data)")
     b.add_argument("--methods", nargs="*", default=None)
-    b.add_argument("--scenes", nargs="*", default=None)
+    b.add_argument("--scenes", nargs="*", default=None,
+                   help="scene names (track gdsr: file keys, e.g. 02 30 for Middlebury, 1000 for NYU, RGB-D-D timestamps)")
     b.add_argument("--sigma", type=float, default=None, help="noise std for track paper (grey levels)")
     b.add_argument("--sets", nargs="+", default=None,
                    help="track gdsr: Middlebury Lu NYUDepthv2_Test RGBDD RGBDD_Test_Realscene (default: Middlebury Lu)")
