@@ -171,3 +171,15 @@ class TestErrors:
         d, c = make(scene)
         with pytest.raises(ValueError, match=match):
             restore_depth(d, c, **SMALL)
+
+
+def test_paper_ablation_switches_every_extension_off():
+    from torch_depth_sr import DepthRestorer
+
+    c = DepthRestorer.ablation("paper").config
+    assert (c.block_size, c.rematch, c.init_fill) == (5, "exact", "pushpull")
+    assert c.guided_prior == 0 and c.fidelity_band == 0 and c.nl_value_weight == 0
+    assert c.singular_support == 0 and not c.singular_line_support and c.singular_gate == 0
+    assert c.use_nonlocal and c.use_outliers and c.use_singular
+    with pytest.raises(ValueError, match="paper"):
+        DepthRestorer.ablation("papers")

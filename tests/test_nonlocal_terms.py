@@ -94,3 +94,56 @@ def test_inputs_not_modified():
     for backend in ("auto", "torch"):
         nonlocal_terms(x, gx, m, value_weight=10.0, backend=backend)
         assert all(torch.equal(a, b) for a, b in zip(before, (x, gx, m.index, m.weight)))
+
+
+def _plane_loop(x, m, ridge):
+    """x̄ and residual variance of the weighted ridge plane fit, pixel by pixel (numpy least squares)."""
+    import numpy as np
+
+    _, _, h, w = x.shape
+    xbar, var = torch.zeros_like(x), torch.zeros_like(x)
+    for i in range(h):
+        for j in range(w):
+            om = m.weight[0, :, i, j].double().numpy()
+            om = om / om.sum()
+            idx = m.index[0, :, i, j].numpy()
+            xs = x[0, 0].flatten()[idx].double().numpy()
+            d = np.stack([idx // w - i, idx % w - j], 1).astype(float)
+            dc = d - om @ d
+            xc = xs - om @ xs
+            # minimise Σ ω (xc − g·dc)² + ridge |g|², then the plane's value at the pixel (offset 0)
+            g = np.linalg.solve(dc.T @ (om[:, None] * dc) + ridge * np.eye(2), dc.T @ (om * xc))
+            xbar[0, 0, i, j] = om @ xs - (om @ d) @ g
+            var[0, 0, i, j] = max(om @ (xc - dc @ g) ** 2, 0.0)
+    return xbar, var
+
+
+@pytest.mark.parametrize("backend", ["auto", "torch"])
+def test_plane_fit_matches_least_squares(backend):
+    x, gx, m = _inputs(torch.float64, b=1, h=9, w=11)
+    _, diag, target = nonlocal_terms(x, gx, m, value_weight=1.0, max_var=1e9, max_offset=1e9, plane_ridge=0.5,
+                                     backend=backend)
+    ref, _ = _plane_loop(x, m, 0.5)
+    torch.testing.assert_close(target, ref)
+    _, diag, _ = nonlocal_terms(x, gx, m, value_weight=1.0, max_var=0.05, max_offset=1e9, plane_ridge=0.5,
+                                backend=backend)
+    _, ref_var = _plane_loop(x, m, 0.5)
+    torch.testing.assert_close(diag, (ref_var < 0.05).to(diag.dtype))
+
+
+def test_plane_fit_is_unbiased_on_a_slope_where_the_mean_is_not():
+    # a clean slope: the matched centres of a border pixel lie on one side, so their mean is off by the slope
+    # times the centroid's distance; the plane through them passes through the pixel's own value
+    h, w = 12, 14
+    yy, xx = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    x = (0.8 * yy + 0.5 * xx + 0.02 * yy * xx)[None, None]
+    m = block_match(x, None, None, block_size=3, search_window=7, k=6, temperature=0.5)
+    kw = dict(value_weight=1.0, max_var=1e9, max_offset=1e9)
+    _, _, mean = nonlocal_terms(x, None, m, **kw)
+    _, _, plane = nonlocal_terms(x, None, m, plane_ridge=1e-3, **kw)
+    assert float((mean - x).abs().max()) > 0.5
+    assert float((plane - x).abs().max()) < 0.2
+    pytest.importorskip("numba")
+    fast = nonlocal_terms(x.float(), None, m, plane_ridge=0.5, **kw)
+    ref = nonlocal_terms(x.float(), None, m, plane_ridge=0.5, backend="torch", **kw)
+    torch.testing.assert_close(fast[2], ref[2])

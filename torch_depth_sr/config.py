@@ -87,6 +87,7 @@ class RestorerConfig:
     nl_value_weight: float = 10.0
     nl_value_var: float = 0.25
     nl_value_offset: float = 2.5  # ... and whose weighted centroid lies within this many pixels (unbiased on slopes)
+    nl_value_ridge: float = 0.0  # > 0: x̄ from a plane fitted to the matched centres (ridge on its slope, px²)
     # singular pixel detection
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
@@ -184,6 +185,12 @@ ABLATIONS = {
     "tv": dict(use_nonlocal=False, use_outliers=False, use_singular=False, fidelity_band=0.0, nl_value_weight=0.0),
     "tv+nl": dict(use_nonlocal=True, use_outliers=False, use_singular=False, fidelity_band=0.0, nl_value_weight=0.0),
     "full": dict(use_nonlocal=True, use_outliers=True, use_singular=True),
+    # the paper's model as it stands (model.md): 5×5 blocks, exact re-matching, x⁰ = y with its holes pulled-pushed,
+    # none of the library's extensions (the guided prior on untrusted pixels, the neighbour/line support and the
+    # gate of the singular test, the fidelity band, the nonlocal value prior). Weights stay in noise-σ units.
+    "paper": dict(use_nonlocal=True, use_outliers=True, use_singular=True, block_size=5, rematch="exact",
+                  init_fill="pushpull", guided_prior=0.0, singular_support=0, singular_line_support=False,
+                  singular_gate=0.0, fidelity_band=0.0, nl_value_weight=0.0),
 }
 
 # Speed presets: settings that trade a measured amount of accuracy for time (README, "Speed and memory").
@@ -296,6 +303,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "nl_value_weight": _real(0.0, lo_open=False),
     "nl_value_var": _real(0.0),
     "nl_value_offset": _real(0.0),
+    "nl_value_ridge": _real(0.0, lo_open=False),
     "upsample_init_band": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,

@@ -92,7 +92,8 @@ class DepthRestorer(nn.Module):
 
     @classmethod
     def ablation(cls, name: str, **overrides) -> "DepthRestorer":
-        """``'tv'``, ``'tv+nl'`` or ``'full'``: the same model with terms switched off."""
+        """``'tv'``, ``'tv+nl'``, ``'full'`` (the defaults) or ``'paper'`` (the paper's model without the library's
+        extensions, :data:`~torch_depth_sr.config.ABLATIONS`): the same model with terms switched off."""
         if name not in ABLATIONS:
             raise ValueError(f"unknown ablation {name!r}; allowed are {sorted(ABLATIONS)}.")
         return cls(**{**ABLATIONS[name], **overrides})

@@ -22,23 +22,28 @@ __all__ = ["nonlocal_terms_cpu"]
 
 
 @njit(cache=True, fastmath=False)
-def _pixels(t0, t1, x, g, idx, wt, width, alpha, stats):
+def _pixels(t0, t1, x, g, idx, wt, width, ridge, alpha, stats):
     """α and the statistics of pixels ``[t0, t1)`` of the flattened batch.
 
     ``x`` (B, HW), ``g`` (B, 2, HW), ``idx``/``wt`` (B, k, HW) → ``alpha`` (B, 2, HW), ``stats`` (B, 3, HW):
-    x̄, the weighted variance and the squared centroid offset. ``g`` and ``alpha`` have 0 channels when α is
+    x̄, the weighted variance and the squared centroid offset. With ``ridge > 0`` x̄ is the value at the pixel
+    of the plane fitted to the matched centres (weighted least squares, ridge on the slope) and the variance
+    that of the residuals (see ``nonlocal_prior.nonlocal_terms``). ``g`` and ``alpha`` have 0 channels when α is
     not wanted.
     """
     k = idx.shape[1]
     hw = idx.shape[2]
     with_alpha = g.shape[1] == 2
-    xm = np.empty(k)  # the pixel's matched values and weights, read once
+    xm = np.empty(k)  # the pixel's matched values, offsets and weights, read once
+    dym = np.empty(k)
+    dxm = np.empty(k)
     wm = np.empty(k)
     for t in range(t0, t1):
         n = t // hw
         i = t - n * hw
         row = i // width
         col = i - row * width
+        sw = 0.0
         xb = 0.0
         oy = 0.0
         ox = 0.0
@@ -46,14 +51,49 @@ def _pixels(t0, t1, x, g, idx, wt, width, alpha, stats):
             j = idx[n, m, i]
             wm[m] = wt[n, m, i]
             xm[m] = x[n, j]
-            xb += wm[m] * xm[m]
             jr = j // width
-            oy += wm[m] * (jr - row)
-            ox += wm[m] * (j - jr * width - col)
+            dym[m] = jr - row
+            dxm[m] = j - jr * width - col
+            sw += wm[m]
+            xb += wm[m] * xm[m]
+            oy += wm[m] * dym[m]
+            ox += wm[m] * dxm[m]
+        if sw > 0.0:
+            xb /= sw
+            oy /= sw
+            ox /= sw
         var = 0.0
+        syy = 0.0
+        sxx = 0.0
+        syx = 0.0
+        syv = 0.0
+        sxv = 0.0
         for m in range(k):
             d = xm[m] - xb
+            ey = dym[m] - oy
+            ex = dxm[m] - ox
             var += wm[m] * d * d
+            syy += wm[m] * ey * ey
+            sxx += wm[m] * ex * ex
+            syx += wm[m] * ey * ex
+            syv += wm[m] * ey * d
+            sxv += wm[m] * ex * d
+        if sw > 0.0:
+            var /= sw
+            syy /= sw
+            sxx /= sw
+            syx /= sw
+            syv /= sw
+            sxv /= sw
+        if ridge > 0.0:
+            a11 = syy + ridge
+            a22 = sxx + ridge
+            det = a11 * a22 - syx * syx
+            gy = (a22 * syv - syx * sxv) / det
+            gx = (a11 * sxv - syx * syv) / det
+            res = var - 2.0 * (gy * syv + gx * sxv) + gy * gy * syy + 2.0 * gy * gx * syx + gx * gx * sxx
+            xb = xb - (gy * oy + gx * ox)
+            var = res if res > 0.0 else 0.0
         stats[n, 0, i] = xb
         stats[n, 1, i] = var
         stats[n, 2, i] = oy * oy + ox * ox
@@ -72,19 +112,20 @@ _CHUNK = 4096  # pixels per parallel task
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def _terms_parallel(x, g, idx, wt, width, alpha, stats):
+def _terms_parallel(x, g, idx, wt, width, ridge, alpha, stats):
     """:func:`_pixels` over every pixel of the batch, chunks of pixels in parallel."""
     total = idx.shape[0] * idx.shape[2]
     for c in prange((total + _CHUNK - 1) // _CHUNK):
-        _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, alpha, stats)
+        _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, ridge, alpha, stats)
 
 
-def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: torch.Tensor):
+def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: torch.Tensor, ridge: float = 0.0):
     """``(α or None, x̄, variance, squared centroid offset)`` of CPU float tensors, without gradient.
 
     Args:
         x: ``(B,1,H,W)`` float32/64. ``grad_x``: ``(B,2,H,W)`` ``D x``, or None (no α).
         index, weight: ``(B,k,H,W)`` matches and their weights.
+        ridge: > 0 fits a plane to the matched centres (see :func:`_pixels`); 0 takes their weighted mean.
 
     Returns:
         α ``(B,2,H,W)`` (None without ``grad_x``), then x̄, variance, offset², each ``(B,1,H,W)``, in ``x``'s dtype.
@@ -99,9 +140,9 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: tor
     alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
     stats = np.empty((b, 3, h * w), dtype=np_dt)
     if kernel_threads() > 1:
-        _terms_parallel(xn, gn, idxn, wn, w, alpha, stats)
+        _terms_parallel(xn, gn, idxn, wn, w, float(ridge), alpha, stats)
     else:  # on the calling thread: no hand-off to numba's thread pool
-        _pixels(0, b * h * w, xn, gn, idxn, wn, w, alpha, stats)
+        _pixels(0, b * h * w, xn, gn, idxn, wn, w, float(ridge), alpha, stats)
     st = torch.from_numpy(stats).view(b, 3, h, w)
     a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None
     return a, st[:, 0:1], st[:, 1:2], st[:, 2:3]

@@ -60,18 +60,46 @@ def _value_prior(xbar, var, offset2, weight: float, max_var: float, max_offset: 
     return weight * agree.to(xbar.dtype), xbar
 
 
-def _centroid_offset2(index: torch.Tensor, w: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
-    """Squared length of the weighted mean offset ``Σ ω (j − i)`` of the matched centres, ``(B,1,H,W)``."""
+def _match_offsets(index: torch.Tensor, like: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Row and column offsets ``j − i`` of the matched centres, each ``(B,k,H,W)`` in ``like``'s dtype."""
     h, wd = like.shape[-2:]
     rows = torch.arange(h, device=like.device, dtype=like.dtype).view(1, 1, h, 1)
     cols = torch.arange(wd, device=like.device, dtype=like.dtype).view(1, 1, 1, wd)
-    oy = torch.div(index, wd, rounding_mode="floor").to(like.dtype) - rows  # (B, k, H, W)
+    oy = torch.div(index, wd, rounding_mode="floor").to(like.dtype) - rows
     ox = (index % wd).to(like.dtype) - cols
-    return (w * oy).sum(1, keepdim=True).square() + (w * ox).sum(1, keepdim=True).square()
+    return oy, ox
+
+
+def _value_statistics(xj: torch.Tensor, w: torch.Tensor, index: torch.Tensor, ridge: float):
+    """``(x̄, variance, |centroid|²)`` of the matched values ``xj (B,k,H,W)`` with weights ``w``.
+
+    ``ridge = 0``: x̄ is the weighted mean. ``ridge > 0``: x̄ is the value at the pixel of the plane
+    ``x_j ≈ a + g·(j − i)`` fitted by weighted least squares with ``ridge·|g|²`` added (px²: where the matched
+    centres do not spread in two directions the slope falls back towards 0), and the variance is the residuals'.
+    """
+    sw = w.sum(1, keepdim=True).clamp_min(torch.finfo(w.dtype).tiny)
+    wn = w / sw
+    oy, ox = _match_offsets(index, xj)
+    xbar = (wn * xj).sum(1, keepdim=True)
+    cy, cx = (wn * oy).sum(1, keepdim=True), (wn * ox).sum(1, keepdim=True)
+    d = xj - xbar
+    var = (wn * d * d).sum(1, keepdim=True)
+    offset2 = cy.square() + cx.square()
+    if ridge <= 0:
+        return xbar, var, offset2
+    ey, ex = oy - cy, ox - cx
+    syy, sxx, syx = ((wn * a * b_).sum(1, keepdim=True) for a, b_ in ((ey, ey), (ex, ex), (ey, ex)))
+    syv, sxv = (wn * ey * d).sum(1, keepdim=True), (wn * ex * d).sum(1, keepdim=True)
+    a11, a22 = syy + ridge, sxx + ridge
+    det = a11 * a22 - syx * syx
+    gy = (a22 * syv - syx * sxv) / det
+    gx = (a11 * sxv - syx * syv) / det
+    res = var - 2 * (gy * syv + gx * sxv) + gy * gy * syy + 2 * gy * gx * syx + gx * gx * sxx
+    return xbar - (gy * cy + gx * cx), res.clamp_min(0), offset2
 
 
 def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float,
-                         max_offset: float = 2.5) -> Tuple[torch.Tensor, torch.Tensor]:
+                         max_offset: float = 2.5, plane_ridge: float = 0.0) -> Tuple[torch.Tensor, torch.Tensor]:
     """``(W, x̄)``: a nonlocal estimate x̄ of each pixel's value from its matched centres, and a weight map.
 
     The paper uses the matched blocks for gradients only (α). Their centre *values* are a nonlocal-means
@@ -82,7 +110,8 @@ def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, 
     the nonlocal gradient α instead was tried and blurred edges (α is large there). Adds η₃/2 ‖x − x̄‖² on
     those pixels to the x-subproblem.
     """
-    _, diag, target = nonlocal_terms(x, None, matches, value_weight=weight, max_var=max_var, max_offset=max_offset)
+    _, diag, target = nonlocal_terms(x, None, matches, value_weight=weight, max_var=max_var, max_offset=max_offset,
+                                     plane_ridge=plane_ridge)
     return diag, target
 
 
@@ -93,7 +122,7 @@ def _kernel():
 
 def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: BlockMatches, *,
                    value_weight: float = 0.0, max_var: float = 0.25, max_offset: float = 2.5,
-                   backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
+                   plane_ridge: float = 0.0, backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
     """α, and the value prior ``(W, x̄)``, from one read of the matches.
 
     Args:
@@ -102,6 +131,8 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
         matches: :class:`~torch_depth_sr.block_matching.BlockMatches` of ``x``, weights included.
         value_weight, max_var, max_offset: the value prior's η₃ and gates (:func:`nonlocal_value_prior`);
             ``value_weight = 0`` skips it.
+        plane_ridge: 0: x̄ is the matched centres' weighted mean; > 0: the value at the pixel of a plane fitted
+            to them (unbiased on slopes wherever the centres lie), the variance gate then reads the residuals.
         backend: ``"auto"`` (the numba kernel for float CPU tensors when no gradient is needed, else torch),
             ``"torch"``.
 
@@ -135,7 +166,7 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
     if backend == "auto" and not tracked and x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64):
         kernel = _kernel()
     if kernel is not None:
-        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight)
+        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight, plane_ridge)
     else:
         w = matches.weight.to(x.dtype)  # (B, k, H, W)
         planes = x if grad_x is None else torch.cat([grad_x, x], dim=1)  # one gather for α and x̄
@@ -143,10 +174,7 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
         alpha = None if grad_x is None else (w.unsqueeze(1) * neigh[:, :2]).sum(dim=2)  # (B, 2, H, W)
         if not value:
             return alpha, None, None
-        xj = neigh[:, -1]  # (B, k, H, W)
-        xbar = (w * xj).sum(1, keepdim=True)
-        var = (w * (xj - xbar) ** 2).sum(1, keepdim=True)
-        offset2 = _centroid_offset2(matches.index, w, x)
+        xbar, var, offset2 = _value_statistics(neigh[:, -1], w, matches.index, plane_ridge)
     if not value:
         return alpha, None, None
     diag, target = _value_prior(xbar, var, offset2, value_weight, max_var, max_offset)
