@@ -8,7 +8,7 @@ from .dictionary import (
     estimate_noise_sigma,
     overcomplete_dct_dictionary,
 )
-from .jbf import JointBilateralFilter, JointBilateralUpsample, joint_bilateral_filter, joint_bilateral_upsample
+from .jbf import JointBilateralFilter, JointBilateralUpsample, jbf_denoise, joint_bilateral_filter, joint_bilateral_upsample
 from .rgf import rolling_guidance_filter
 
 __all__ = [
@@ -21,6 +21,7 @@ __all__ = [
     "bicubic_upsample",
     "dictionary_denoise",
     "estimate_noise_sigma",
+    "jbf_denoise",
     "joint_bilateral_filter",
     "joint_bilateral_upsample",
     "overcomplete_dct_dictionary",

@@ -17,6 +17,7 @@ __all__ = [
     "DENOISE_METHODS",
     "UPSAMPLE_METHODS",
     "JBF_PARAMS",
+    "JBF_TRACK_PARAMS",
     "JBU_PARAMS",
     "DICTIONARY_PARAMS",
     "RGF_PARAMS",
@@ -26,9 +27,19 @@ __all__ = [
 DENOISE_METHODS = ("input", "jbf", "rgf", "dictionary", "tv", "tv+nl", "full")
 UPSAMPLE_METHODS = ("bicubic", "jbf", "tv", "tv+nl", "full")
 
-# Fitted on the 2006 scenes + synthetic scenes (tracks paper + sensor, 160×160 centre crops) by
-# `python -m torch_depth_sr.evaluation.tune_baselines` (grid of 80; best mean RMSE 2.216).
-JBF_PARAMS = dict(kernel_size=11, sigma_space=3.0, sigma_color=0.05)
+# The `jbf` denoising baseline (`baselines.jbf.jbf_denoise`: mask-normalised JBF, σc in grey levels of the 0-255
+# colour, OpenCV's window radius round(1.5 σs)), fitted per track on the full 2006 images by
+# `python -m torch_depth_sr.evaluation.tune_jbf` (grids in `tune_jbf.GRIDS`; best mean RMSE paper 1.804,
+# sensor 2.290). `paper`: one pass; `sensor`: passes with median-based outlier rejection.
+JBF_TRACK_PARAMS = {
+    "paper": dict(sigma_space=2.5, sigma_color=10.0, iterations=1, reject=None, color_distance_type="l2"),
+    "sensor": dict(sigma_space=2.5, sigma_color=20.0, iterations=2, reject=20.0, color_distance_type="l1"),
+}
+# The `paper` setting as `joint_bilateral_filter` arguments (one pass; the speed benchmark times it).
+JBF_PARAMS = dict(kernel_size=2 * round(1.5 * JBF_TRACK_PARAMS["paper"]["sigma_space"]) + 1,
+                  sigma_space=JBF_TRACK_PARAMS["paper"]["sigma_space"],
+                  sigma_color=JBF_TRACK_PARAMS["paper"]["sigma_color"] / 255.0,
+                  color_distance_type=JBF_TRACK_PARAMS["paper"]["color_distance_type"])
 JBU_PARAMS = dict(sigma_space=1.0, sigma_color=0.1)
 DICTIONARY_PARAMS = dict(patch_size=8, n_atoms=128, stride=4)
 # Fitted per track on the full 2006 images by `python -m torch_depth_sr.evaluation.tune_rgf` (grid σs {2, 3, 5}
@@ -57,7 +68,7 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
 
     ``config``: :class:`~torch_depth_sr.RestorerConfig` overrides for the model methods (``tv``, ``tv+nl``,
     ``full``), e.g. ``{"block_size": 5}``; the shipped ``trained`` parameters and the baselines ignore it.
-    ``track``: the benchmark track; ``rgf`` has settings fitted per track (``paper`` when not given).
+    ``track``: the benchmark track; ``jbf`` and ``rgf`` have settings fitted per track (``paper`` when not given).
     """
     y = sample["depth"][None].to(device)
     rgb = sample["rgb"][None].to(device)
@@ -71,11 +82,11 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
 
             return bicubic_upsample(fill_holes(y, mask), factor)
         if name == "jbf":
-            from ..baselines import joint_bilateral_filter, joint_bilateral_upsample
+            from ..baselines import jbf_denoise, joint_bilateral_upsample
 
             if factor > 1:
                 return joint_bilateral_upsample(y, rgb, factor, **JBU_PARAMS)
-            return joint_bilateral_filter(y, rgb, mask, **JBF_PARAMS)
+            return jbf_denoise(y, rgb, mask, **JBF_TRACK_PARAMS.get(track or "paper", JBF_TRACK_PARAMS["paper"]))
         if name == "rgf":
             from ..baselines import rolling_guidance_filter
 
