@@ -86,8 +86,11 @@ class RestorerConfig:
     # below nl_value_var σ̂²); 0 = off (issue 11)
     nl_value_weight: float = 10.0
     nl_value_var: float = 0.25
-    nl_value_offset: float = 2.5  # ... and whose weighted centroid lies within this many pixels (unbiased on slopes)
-    nl_value_ridge: float = 0.0  # > 0: x̄ from a plane fitted to the matched centres (ridge on its slope, px²)
+    # ... and whose weighted centroid lies within this many pixels (how far the fitted plane may be extrapolated)
+    nl_value_offset: float = 6.0
+    # x̄ is the value at the pixel of a plane fitted to the matched centres (ridge on its slope, px²; 0 = their
+    # weighted mean, biased on slopes wherever the centres lie on one side, which needed a 2.5 px centroid gate)
+    nl_value_ridge: float = 1.0
     # singular pixel detection
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
