@@ -366,6 +366,8 @@ def test_model_refine_rematching_stays_close_to_exact():
         out = DepthRestorer(rematch=mode)(y, rgb)
         rmse[mode] = float((out - gt).pow(2).mean().sqrt())
     assert rmse["refine"] < float((y - gt)[y > 0].pow(2).mean().sqrt()) / 2  # it still restores
-    assert abs(rmse["refine"] - rmse["exact"]) <= 0.03 * rmse["exact"], rmse
+    # not worse than exact by more than 3 % (on this small input it is the better one since the plane-fit value
+    # prior: 1.52 vs 1.62; matches of a cheaper search differ, and the gated prior reacts to which pixels pass)
+    assert rmse["refine"] <= 1.03 * rmse["exact"], rmse
     with pytest.raises(Exception, match="rematch"):
         DepthRestorer(rematch="patchmatch")

@@ -147,3 +147,20 @@ def test_plane_fit_is_unbiased_on_a_slope_where_the_mean_is_not():
     fast = nonlocal_terms(x.float(), None, m, plane_ridge=0.5, **kw)
     ref = nonlocal_terms(x.float(), None, m, plane_ridge=0.5, backend="torch", **kw)
     torch.testing.assert_close(fast[2], ref[2])
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_range_weights_kernel_equals_torch_path_and_spare_alpha(dtype):
+    x, gx, m = _inputs(dtype)
+    rs = torch.full_like(x, 0.8)
+    rs[..., :5, :] = 0  # no range weights there
+    kw = dict(value_weight=1.0, max_var=0.25, max_offset=6.0, plane_ridge=1.0, range_sigma=rs)
+    ref = nonlocal_terms(x, gx, m, backend="torch", **kw)
+    plain = nonlocal_terms(x, gx, m, backend="torch", **{**kw, "range_sigma": None})
+    torch.testing.assert_close(ref[0], plain[0])  # α keeps the match weights
+    torch.testing.assert_close(ref[2][..., :5, :], plain[2][..., :5, :])
+    assert float((ref[2] - plain[2]).abs().max()) > 1e-3  # the step is where the range weights act
+    pytest.importorskip("numba")
+    fast = nonlocal_terms(x, gx, m, **kw)
+    torch.testing.assert_close(fast[0], ref[0])
+    torch.testing.assert_close(fast[2], ref[2])

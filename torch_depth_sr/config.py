@@ -91,6 +91,8 @@ class RestorerConfig:
     # x̄ is the value at the pixel of a plane fitted to the matched centres (ridge on its slope, px²; 0 = their
     # weighted mean, biased on slopes wherever the centres lie on one side, which needed a 2.5 px centroid gate)
     nl_value_ridge: float = 1.0
+    # the centres also weighed by exp(−(x_j − x_i)²/2r²), r in noise σ: an edge-stopping range kernel (0 = off)
+    nl_value_range: float = 3.0
     # singular pixel detection
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
@@ -307,6 +309,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "nl_value_var": _real(0.0),
     "nl_value_offset": _real(0.0),
     "nl_value_ridge": _real(0.0, lo_open=False),
+    "nl_value_range": _real(0.0, lo_open=False),
     "upsample_init_band": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,

@@ -196,7 +196,8 @@ class UnrolledLayer(nn.Module):
             with stage(s.timings, "nonlocal", dev):
                 new_alpha, diag, target = nonlocal_terms(
                     s.x, dx if c.use_nonlocal else None, matches, value_weight=c.nl_value_weight if value_prior else 0.0,
-                    max_var=c.nl_value_var, max_offset=c.nl_value_offset, plane_ridge=c.nl_value_ridge)
+                    max_var=c.nl_value_var, max_offset=c.nl_value_offset, plane_ridge=c.nl_value_ridge,
+                    range_sigma=c.nl_value_range if c.nl_value_range > 0 else None)
             if c.use_nonlocal:
                 alpha = new_alpha
         if c.use_singular and ctx.factor == 1:

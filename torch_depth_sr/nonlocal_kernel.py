@@ -22,7 +22,7 @@ __all__ = ["nonlocal_terms_cpu"]
 
 
 @njit(cache=True, fastmath=False)
-def _pixels(t0, t1, x, g, idx, wt, width, ridge, alpha, stats):
+def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     """α and the statistics of pixels ``[t0, t1)`` of the flattened batch.
 
     ``x`` (B, HW), ``g`` (B, 2, HW), ``idx``/``wt`` (B, k, HW) → ``alpha`` (B, 2, HW), ``stats`` (B, 3, HW):
@@ -47,10 +47,15 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, alpha, stats):
         xb = 0.0
         oy = 0.0
         ox = 0.0
+        xi = x[n, i]
+        rs = range_sigma[n, i] if range_sigma.shape[1] > 0 else 0.0
         for m in range(k):
             j = idx[n, m, i]
             wm[m] = wt[n, m, i]
             xm[m] = x[n, j]
+            if rs > 0.0:
+                r = (xm[m] - xi) / rs
+                wm[m] *= np.exp(-0.5 * r * r)
             jr = j // width
             dym[m] = jr - row
             dxm[m] = j - jr * width - col
@@ -94,6 +99,8 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, alpha, stats):
             res = var - 2.0 * (gy * syv + gx * sxv) + gy * gy * syy + 2.0 * gy * gx * syx + gx * gx * sxx
             xb = xb - (gy * oy + gx * ox)
             var = res if res > 0.0 else 0.0
+        if sw <= 1e-12:  # no centre left (range weights): no estimate, never passes the variance gate
+            var = np.inf
         stats[n, 0, i] = xb
         stats[n, 1, i] = var
         stats[n, 2, i] = oy * oy + ox * ox
@@ -102,8 +109,8 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, alpha, stats):
             a1 = 0.0
             for m in range(k):
                 j = idx[n, m, i]
-                a0 += wm[m] * g[n, 0, j]
-                a1 += wm[m] * g[n, 1, j]
+                a0 += wt[n, m, i] * g[n, 0, j]
+                a1 += wt[n, m, i] * g[n, 1, j]
             alpha[n, 0, i] = a0
             alpha[n, 1, i] = a1
 
@@ -112,20 +119,23 @@ _CHUNK = 4096  # pixels per parallel task
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def _terms_parallel(x, g, idx, wt, width, ridge, alpha, stats):
+def _terms_parallel(x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     """:func:`_pixels` over every pixel of the batch, chunks of pixels in parallel."""
     total = idx.shape[0] * idx.shape[2]
     for c in prange((total + _CHUNK - 1) // _CHUNK):
-        _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, ridge, alpha, stats)
+        _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, ridge, range_sigma, alpha, stats)
 
 
-def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: torch.Tensor, ridge: float = 0.0):
+def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: torch.Tensor, ridge: float = 0.0,
+                       range_sigma=None):
     """``(α or None, x̄, variance, squared centroid offset)`` of CPU float tensors, without gradient.
 
     Args:
         x: ``(B,1,H,W)`` float32/64. ``grad_x``: ``(B,2,H,W)`` ``D x``, or None (no α).
         index, weight: ``(B,k,H,W)`` matches and their weights.
         ridge: > 0 fits a plane to the matched centres (see :func:`_pixels`); 0 takes their weighted mean.
+        range_sigma: None, or a ``(B,1,H,W)`` map (or broadcastable) of the range σ that also weighs each centre
+            of the value prior by exp(−(x_j − x_i)²/2σ²) (0 = not there).
 
     Returns:
         α ``(B,2,H,W)`` (None without ``grad_x``), then x̄, variance, offset², each ``(B,1,H,W)``, in ``x``'s dtype.
@@ -137,12 +147,15 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: tor
     gn = as_numpy(grad_x.to(x.dtype), (b, 2, h * w), np_dt) if grad_x is not None else np.zeros((b, 0, h * w), np_dt)
     idxn = as_numpy(index.to(torch.int64), (b, k, h * w), np.int64)
     wn = as_numpy(weight.to(x.dtype), (b, k, h * w), np_dt)
+    # per-pixel range σ of the value prior's centre weights (0 = none), or no channel at all
+    rsn = (as_numpy(range_sigma.to(x.dtype).expand(b, 1, h, w), (b, h * w), np_dt) if range_sigma is not None
+           else np.zeros((b, 0), np_dt))
     alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
     stats = np.empty((b, 3, h * w), dtype=np_dt)
     if kernel_threads() > 1:
-        _terms_parallel(xn, gn, idxn, wn, w, float(ridge), alpha, stats)
+        _terms_parallel(xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
     else:  # on the calling thread: no hand-off to numba's thread pool
-        _pixels(0, b * h * w, xn, gn, idxn, wn, w, float(ridge), alpha, stats)
+        _pixels(0, b * h * w, xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
     st = torch.from_numpy(stats).view(b, 3, h, w)
     a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None
     return a, st[:, 0:1], st[:, 1:2], st[:, 2:3]

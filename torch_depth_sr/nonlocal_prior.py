@@ -77,14 +77,16 @@ def _value_statistics(xj: torch.Tensor, w: torch.Tensor, index: torch.Tensor, ri
     ``x_j ≈ a + g·(j − i)`` fitted by weighted least squares with ``ridge·|g|²`` added (px²: where the matched
     centres do not spread in two directions the slope falls back towards 0), and the variance is the residuals'.
     """
-    sw = w.sum(1, keepdim=True).clamp_min(torch.finfo(w.dtype).tiny)
-    wn = w / sw
+    sw = w.sum(1, keepdim=True)
+    empty = sw <= 1e-12  # no centre left (range weights): no estimate, never passes the variance gate
+    wn = w / sw.clamp_min(torch.finfo(w.dtype).tiny)
     oy, ox = _match_offsets(index, xj)
     xbar = (wn * xj).sum(1, keepdim=True)
     cy, cx = (wn * oy).sum(1, keepdim=True), (wn * ox).sum(1, keepdim=True)
     d = xj - xbar
     var = (wn * d * d).sum(1, keepdim=True)
     offset2 = cy.square() + cx.square()
+    var = torch.where(empty, torch.full_like(var, float("inf")), var)
     if ridge <= 0:
         return xbar, var, offset2
     ey, ex = oy - cy, ox - cx
@@ -95,7 +97,8 @@ def _value_statistics(xj: torch.Tensor, w: torch.Tensor, index: torch.Tensor, ri
     gy = (a22 * syv - syx * sxv) / det
     gx = (a11 * sxv - syx * syv) / det
     res = var - 2 * (gy * syv + gx * sxv) + gy * gy * syy + 2 * gy * gx * syx + gx * gx * sxx
-    return xbar - (gy * cy + gx * cx), res.clamp_min(0), offset2
+    res = torch.where(empty, torch.full_like(res, float("inf")), res.clamp_min(0))
+    return xbar - (gy * cy + gx * cx), res, offset2
 
 
 def nonlocal_value_prior(x: torch.Tensor, matches: BlockMatches, weight: float, max_var: float,
@@ -122,7 +125,7 @@ def _kernel():
 
 def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: BlockMatches, *,
                    value_weight: float = 0.0, max_var: float = 0.25, max_offset: float = 2.5,
-                   plane_ridge: float = 0.0, backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
+                   plane_ridge: float = 0.0, range_sigma=None, backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
     """α, and the value prior ``(W, x̄)``, from one read of the matches.
 
     Args:
@@ -133,6 +136,9 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
             ``value_weight = 0`` skips it.
         plane_ridge: 0: x̄ is the matched centres' weighted mean; > 0: the value at the pixel of a plane fitted
             to them (unbiased on slopes wherever the centres lie), the variance gate then reads the residuals.
+        range_sigma: None, or a float or ``(B,1,H,W)`` map r: each centre of the value prior is also weighed by
+            exp(−(x_j − x_i)²/2r²) (an edge-stopping range kernel on the current estimate, as the rolling-guidance
+            filter's) where r > 0; α keeps the match weights.
         backend: ``"auto"`` (the numba kernel for float CPU tensors when no gradient is needed, else torch),
             ``"torch"``.
 
@@ -162,11 +168,13 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
         return None, None, None
     tracked = torch.is_grad_enabled() and (x.requires_grad or matches.weight.requires_grad
                                            or (grad_x is not None and grad_x.requires_grad))
+    if range_sigma is not None:
+        range_sigma = torch.as_tensor(range_sigma, dtype=x.dtype, device=x.device)
     kernel = None
     if backend == "auto" and not tracked and x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64):
         kernel = _kernel()
     if kernel is not None:
-        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight, plane_ridge)
+        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight, plane_ridge, range_sigma)
     else:
         w = matches.weight.to(x.dtype)  # (B, k, H, W)
         planes = x if grad_x is None else torch.cat([grad_x, x], dim=1)  # one gather for α and x̄
@@ -174,7 +182,14 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
         alpha = None if grad_x is None else (w.unsqueeze(1) * neigh[:, :2]).sum(dim=2)  # (B, 2, H, W)
         if not value:
             return alpha, None, None
-        xbar, var, offset2 = _value_statistics(neigh[:, -1], w, matches.index, plane_ridge)
+        xj = neigh[:, -1]
+        if range_sigma is None:
+            wv = w
+        else:
+            rs = range_sigma
+            ratio = torch.where(rs > 0, (xj - x) / rs.clamp_min(torch.finfo(x.dtype).tiny), torch.zeros_like(xj))
+            wv = w * torch.exp(-0.5 * ratio ** 2)
+        xbar, var, offset2 = _value_statistics(xj, wv, matches.index, plane_ridge)
     if not value:
         return alpha, None, None
     diag, target = _value_prior(xbar, var, offset2, value_weight, max_var, max_offset)
