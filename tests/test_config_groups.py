@@ -47,6 +47,16 @@ def test_group_puts_back_what_it_read(group):
         assert back == c
 
 
+def test_with_groups_writes_a_group_back_and_checks_it():
+    c = RestorerConfig()
+    d = c.with_groups(dataclasses.replace(c.singular, rounds=1), dataclasses.replace(c.solver, tol=1e-2))
+    assert (d.singular_rounds, d.cg_tol) == (1, 1e-2) and d.replace(singular_rounds=3, cg_tol=1e-3) == c
+    with pytest.raises(ParameterError, match="singular_rounds"):
+        c.with_groups(dataclasses.replace(c.singular, rounds=0))
+    with pytest.raises(ParameterError, match="group"):
+        c.with_groups({"singular_rounds": 1})
+
+
 def test_groups_read_the_flat_fields():
     c = RestorerConfig(singular_tau=0.4, cg_tol=1e-4, cg_fixed_iters=(), nl_value_weight=0.0, rematch="exact",
                        init_dt_iterations=2, upsample_scale={"mu1": 2.0}, degradation="bicubic", lam=0.7)

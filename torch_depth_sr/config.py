@@ -158,6 +158,21 @@ class RestorerConfig:
     def replace(self, **changes) -> "RestorerConfig":
         return dataclasses.replace(self, **changes)
 
+    def with_groups(self, *groups: "_Group") -> "RestorerConfig":
+        """A copy with the fields of each group replaced (and checked).
+
+        Examples:
+            >>> c = RestorerConfig()
+            >>> c.with_groups(dataclasses.replace(c.singular, rounds=1)).singular_rounds
+            1
+        """
+        changes: dict = {}
+        for g in groups:
+            if not isinstance(g, _Group):
+                raise ParameterError("a settings group", g, "a group such as config.singular or config.solver")
+            changes.update(g.to_flat())
+        return self.replace(**changes)
+
     # ---- typed groups, one per part of the model (built from the flat fields on each access) ----------
     @property
     def layer(self) -> "LayerConfig":
