@@ -73,6 +73,10 @@ class DepthRestorer(nn.Module):
         trainable: whether the parameters require grad.
         **overrides: fields of the config to change, e.g. ``num_layers=4`` or ``use_nonlocal=False``.
 
+    The model and its layers take their settings groups (:mod:`torch_depth_sr.config`) from the config when
+    they are built: to change a setting, build a new model (``DepthRestorer(model.config.replace(...))``)
+    and load the state dict into it.
+
     Examples:
         >>> from torch_depth_sr.datasets.synthetic import make_scene
         >>> s = make_scene(64, 80, seed=0)
@@ -89,8 +93,9 @@ class DepthRestorer(nn.Module):
             raise ValueError(f"num_layers must be >= 1; got {config.num_layers}.")
         self.config = config
         # the settings groups of the stages the model runs itself (x⁰, Q⁰, the first matches); the layers hold theirs
-        self.initial, self.upsampling = config.initial, config.upsampling
+        self.terms, self.initial, self.upsampling = config.layer, config.initial, config.upsampling
         self.block_matching, self.singular = config.block_matching, config.singular
+        self.fidelity_band = config.fidelity_band
         self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
         self.log_temperature = nn.Parameter(torch.tensor(config.temperature).log(), requires_grad=trainable)
         # ρ weighs colour in the block distance, which picks the matches: a discrete choice with no gradient, so
@@ -162,8 +167,8 @@ class DepthRestorer(nn.Module):
                 torch.cuda.synchronize(state.x.device)
             state.timings["total"] = time.perf_counter() - t0
         x = state.x
-        if K.is_identity and self.config.fidelity_band > 0:  # trusted measurements bound x on their own grid
-            band = noise_band(step / scale, sigma / scale, self.config.fidelity_band)  # in units of the scale
+        if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
+            band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)
         x = x * s4 + o4
         if fill == "trusted":
@@ -180,7 +185,7 @@ class DepthRestorer(nn.Module):
         return RestorationResult(out, conf, trusted, outliers, info)
 
     def _initial_state(self, yn, observed, guide, K: Degradation, noise=None, grid_step=None, timings=None):
-        terms, init = self.layers[0].terms, self.initial
+        terms, init = self.terms, self.initial
         ctx = RestorationContext(y=yn, observed=observed, rgb=guide, K=K,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp(),
                                  grid_step=grid_step)
