@@ -7,10 +7,13 @@ import torch
 from torch_depth_sr.errors import DepthSRError, ShapeError
 from torch_depth_sr.operators import (
     AreaDownsample,
+    BicubicDownsample,
+    Degradation,
     Gradient,
     Identity,
     area_downsample,
     area_downsample_adjoint,
+    degradation_operator,
     dot_test,
     grad,
     grad_adjoint,
@@ -156,6 +159,7 @@ OPERATORS = [
     pytest.param(AreaDownsample(2), (2, 1, 8, 6), (2, 1, 4, 3), id="area-s2"),
     pytest.param(AreaDownsample(3), (2, 2, 9, 12), (2, 2, 3, 4), id="area-s3"),
     pytest.param(AreaDownsample(4), (1, 1, 16, 8), (1, 1, 4, 2), id="area-s4"),
+    pytest.param(BicubicDownsample(2), (2, 1, 12, 10), (2, 1, 6, 5), id="bicubic-s2"),
 ]
 
 
@@ -203,3 +207,38 @@ def test_model_with_bicubic_degradation_upsamples():
                                          align_corners=False)
     out = DepthRestorer(degradation="bicubic", num_layers=2)(lr, s["rgb"][None])
     assert out.shape == (1, 1, 48, 64) and torch.isfinite(out).all()
+
+
+class TestDegradation:
+    """The task as an operator: what the model builds and what the layers read of it."""
+
+    @pytest.mark.parametrize("kind, s, cls, identity", [
+        ("area", 1, Identity, True), ("bicubic", 1, Identity, True),
+        ("area", 2, AreaDownsample, False), ("area", 3, AreaDownsample, False),
+        ("bicubic", 4, BicubicDownsample, False),
+    ])
+    def test_factory_builds_the_operator_of_the_task(self, kind, s, cls, identity):
+        K = degradation_operator(kind, s)
+        assert type(K) is cls and isinstance(K, Degradation)
+        assert K.scale == s and K.is_identity is identity
+
+    def test_factory_refuses_unknown_kind_and_bad_factor(self):
+        with pytest.raises(DepthSRError, match="allowed are"):
+            degradation_operator("nearest", 2)
+        with pytest.raises(DepthSRError, match="int >= 1"):
+            degradation_operator("area", 0)
+
+    @pytest.mark.parametrize("K", [AreaDownsample(2), AreaDownsample(3), BicubicDownsample(2), BicubicDownsample(4)],
+                             ids=repr)
+    def test_normal_maps_a_constant_to_one_over_s_squared_in_the_interior(self, K):
+        # what the model's preconditioner assumes of KᵀK (exact for area; away from the border for bicubic)
+        s = K.scale
+        x = torch.ones(1, 1, 12 * s, 12 * s, dtype=torch.float64)
+        inner = K.normal(x)[..., 4 * s:-4 * s, 4 * s:-4 * s]
+        torch.testing.assert_close(inner, torch.full_like(inner, 1 / s ** 2))
+
+    @pytest.mark.parametrize("s", [2, 3, 5, 16])
+    def test_area_adjoint_replicates_each_pixel(self, s):
+        v = torch.randn(2, 1, 7, 9, dtype=torch.float64)
+        ref = v.repeat_interleave(s, dim=-2).repeat_interleave(s, dim=-1) / s ** 2
+        assert torch.equal(area_downsample_adjoint(v, s), ref)

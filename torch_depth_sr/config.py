@@ -7,11 +7,27 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from numbers import Integral, Real
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar, Optional
 
 from .errors import ModelFileError, ParameterError
 
-__all__ = ["RestorerConfig", "load_config_file", "ABLATIONS", "PRESETS"]
+__all__ = [
+    "ABLATIONS",
+    "BlockMatchingConfig",
+    "InitConfig",
+    "JBUConfig",
+    "LayerConfig",
+    "LayerMultipliers",
+    "PRESETS",
+    "RestorerConfig",
+    "SIDED_FILL_DEFAULTS",
+    "SidedFillConfig",
+    "SingularConfig",
+    "SolverConfig",
+    "UpsamplingConfig",
+    "ValuePriorConfig",
+    "load_config_file",
+]
 
 
 @dataclass
@@ -21,6 +37,16 @@ class RestorerConfig:
     Units: depth is normalised by the estimated noise level (scale policy in ``noise.py``),
     so ``lam``, ``eta``, ``gamma`` and ``singular_sigma_floor`` are in noise-σ units, and
     ``temperature`` is in σ² per block pixel.
+
+    The flat fields are the stored form (JSON files, ``RestorerConfig(**fields)``); each part of the model
+    receives its own typed, frozen group instead of the whole config: :attr:`layer`, :attr:`block_matching`,
+    :attr:`value_prior`, :attr:`singular`, :attr:`solver`, :attr:`initial` and :attr:`upsampling` (every field
+    but ``num_layers``, ``fidelity_band`` and ``extra`` belongs to exactly one group).
+
+    Examples:
+        >>> c = RestorerConfig(singular_rounds=2)
+        >>> c.singular.rounds, c.solver.iterations(9)
+        (2, 1)
     """
 
     num_layers: int = 8
@@ -134,6 +160,57 @@ class RestorerConfig:
     def replace(self, **changes) -> "RestorerConfig":
         return dataclasses.replace(self, **changes)
 
+    def with_groups(self, *groups: "_Group") -> "RestorerConfig":
+        """A copy with the fields of each group replaced (and checked).
+
+        Examples:
+            >>> c = RestorerConfig()
+            >>> c.with_groups(dataclasses.replace(c.singular, rounds=1)).singular_rounds
+            1
+        """
+        changes: dict = {}
+        for g in groups:
+            if not isinstance(g, _Group):
+                raise ParameterError("a settings group", g, "a group such as config.singular or config.solver")
+            changes.update(g.to_flat())
+        return self.replace(**changes)
+
+    # ---- typed groups, one per part of the model (built from the flat fields on each access) ----------
+    @property
+    def layer(self) -> "LayerConfig":
+        """The unrolled layer's terms and initial weights (:class:`~torch_depth_sr.layers.UnrolledLayer`)."""
+        return LayerConfig.from_config(self)
+
+    @property
+    def block_matching(self) -> "BlockMatchingConfig":
+        """Block matching: search, schedule of re-matching and the initial ρ and h."""
+        return BlockMatchingConfig.from_config(self)
+
+    @property
+    def value_prior(self) -> "ValuePriorConfig":
+        """The nonlocal value prior (``nl_value_*``)."""
+        return ValuePriorConfig.from_config(self)
+
+    @property
+    def singular(self) -> "SingularConfig":
+        """The singular-pixel test and its gate (``singular_*``)."""
+        return SingularConfig.from_config(self)
+
+    @property
+    def solver(self) -> "SolverConfig":
+        """The linear solves (``cg_*``, ``precondition``, ``implicit_backward``)."""
+        return SolverConfig.from_config(self)
+
+    @property
+    def initial(self) -> "InitConfig":
+        """The initial estimate x⁰ (``init_*`` and the sided hole fill of ``extra``)."""
+        return InitConfig.from_config(self)
+
+    @property
+    def upsampling(self) -> "UpsamplingConfig":
+        """Guided upsampling: the degradation, x⁰ on the fine grid and the weights' multipliers (``upsample_*``)."""
+        return UpsamplingConfig.from_config(self)
+
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2, sort_keys=True)
 
@@ -148,6 +225,240 @@ class RestorerConfig:
             raise ParameterError("keys", sorted(unknown), f"RestorerConfig fields ({', '.join(sorted(known))})",
                                  "Remove or rename the unknown keys.")
         return cls(**d)
+
+
+# ---- typed groups ----------------------------------------------------------------------------------
+class _Group:
+    """A frozen group of settings read from the flat :class:`RestorerConfig` fields named in ``_FLAT``
+    (group field → flat field)."""
+
+    _FLAT: ClassVar[dict] = {}
+
+    @classmethod
+    def from_config(cls, c: RestorerConfig):
+        return cls(**{g: getattr(c, f) for g, f in cls._FLAT.items()})
+
+    def to_flat(self) -> dict:
+        """The flat fields this group stands for: ``config.replace(**group.to_flat())`` puts it back."""
+        return {f: getattr(self, g) for g, f in self._FLAT.items()}
+
+
+def _same(*names: str) -> dict:
+    return {n: n for n in names}
+
+
+def _prefixed(prefix: str, *names: str) -> dict:
+    return {n: prefix + n for n in names}
+
+
+@dataclass(frozen=True)
+class LayerConfig(_Group):
+    """What one unrolled layer computes: initial λ, η, γ, μ₁, μ₂, the shrinkage, the terms switched on and the
+    guided prior β (on untrusted pixels; on singular ones too with ``prior_on_singular``)."""
+
+    lam: float
+    eta: float
+    gamma: float
+    mu1: float
+    mu2: float
+    isotropic: bool
+    use_nonlocal: bool
+    use_outliers: bool
+    use_singular: bool
+    guided_prior: float
+    prior_on_singular: bool
+    _FLAT: ClassVar[dict] = _same("lam", "eta", "gamma", "mu1", "mu2", "isotropic", "use_nonlocal", "use_outliers",
+                                  "use_singular", "guided_prior", "prior_on_singular")
+
+
+@dataclass(frozen=True)
+class BlockMatchingConfig(_Group):
+    """Block matching (:func:`~torch_depth_sr.block_matching.block_match`), the layers that match again and how,
+    and the initial colour weight ρ and temperature h of the model."""
+
+    block_size: int
+    search_window: int
+    k: int
+    include_self: bool
+    match_layers: tuple
+    rematch: str
+    rematch_lattice: int
+    color_weight: float
+    temperature: float
+    _FLAT: ClassVar[dict] = _same("block_size", "search_window", "k", "include_self", "match_layers", "rematch",
+                                  "rematch_lattice", "color_weight", "temperature")
+
+
+@dataclass(frozen=True)
+class ValuePriorConfig(_Group):
+    """The nonlocal value prior η₃/2‖x − x̄‖² (:func:`~torch_depth_sr.nonlocal_prior.nonlocal_terms`); flat fields
+    ``nl_value_weight``, ``nl_value_var``, ``nl_value_offset``, ``nl_value_ridge``, ``nl_value_range``."""
+
+    weight: float
+    var: float
+    offset: float
+    ridge: float
+    range: float
+    _FLAT: ClassVar[dict] = _prefixed("nl_value_", "weight", "var", "offset", "ridge", "range")
+
+
+@dataclass(frozen=True)
+class SingularConfig(_Group):
+    """The singular-pixel test (:func:`~torch_depth_sr.singular.detect_singular`), the neighbour and line support
+    that keeps surface pixels trusted, and the per-sample gate; flat fields ``singular_*``."""
+
+    tau: float
+    sigma_floor: float
+    rounds: int
+    support: int
+    support_tol: float
+    line_support: bool
+    gate: float
+    _FLAT: ClassVar[dict] = _prefixed("singular_", "tau", "sigma_floor", "rounds", "support", "support_tol",
+                                      "line_support", "gate")
+
+
+@dataclass(frozen=True)
+class SolverConfig(_Group):
+    """The x-update's preconditioned CG (:func:`~torch_depth_sr.solvers.implicit.cg_solve`); flat fields
+    ``cg_fixed_iters``, ``cg_tol``, ``cg_max_iter``, ``precondition``, ``implicit_backward``."""
+
+    fixed_iters: tuple
+    tol: float
+    max_iter: int
+    precondition: bool
+    implicit_backward: bool
+    _FLAT: ClassVar[dict] = {"fixed_iters": "cg_fixed_iters", "tol": "cg_tol", "max_iter": "cg_max_iter",
+                             **_same("precondition", "implicit_backward")}
+
+    def iterations(self, index: int) -> Optional[int]:
+        """The fixed CG iteration count of layer ``index`` (the schedule's last entry repeats); None = to ``tol``."""
+        if not self.fixed_iters:
+            return None
+        return int(self.fixed_iters[min(index, len(self.fixed_iters) - 1)])
+
+
+# Depth-gap-aware hole fill of x⁰ (torch_depth_sr.fill.fill_holes_sided), switched and tuned through
+# ``config.extra``: ``{"sided_fill": False}`` restores the plain masked-JBF / push-pull fill of the holes;
+# ``{"sided_fill_params": {...}}`` overrides the arguments below (gap in noise-σ units of the normalised depth).
+SIDED_FILL_DEFAULTS = dict(gap=4.0, min_share=0.75, passes=8, choice_sigma_space=1.5, ambiguous="mix")
+
+
+@dataclass(frozen=True)
+class SidedFillConfig:
+    """Arguments of :func:`~torch_depth_sr.fill.fill_holes_sided` for x⁰ (``config.extra["sided_fill_params"]``
+    overrides :data:`SIDED_FILL_DEFAULTS`); ``ambiguous="mix"``: a hole whose side is not clear keeps the
+    weighted mean of both sides. ``quantiles`` is passed only when given."""
+
+    gap: float = SIDED_FILL_DEFAULTS["gap"]
+    min_share: float = SIDED_FILL_DEFAULTS["min_share"]
+    passes: int = SIDED_FILL_DEFAULTS["passes"]
+    choice_sigma_space: Optional[float] = SIDED_FILL_DEFAULTS["choice_sigma_space"]
+    ambiguous: str = SIDED_FILL_DEFAULTS["ambiguous"]
+    quantiles: Optional[tuple] = None
+
+    def fill_arguments(self) -> dict:
+        """Keyword arguments for ``fill_holes_sided`` (all but ``ambiguous``)."""
+        kw = dict(gap=self.gap, min_share=self.min_share, passes=self.passes,
+                  choice_sigma_space=self.choice_sigma_space)
+        if self.quantiles is not None:
+            kw["quantiles"] = self.quantiles
+        return kw
+
+
+@dataclass(frozen=True)
+class InitConfig(_Group):
+    """The initial estimate x⁰ (:func:`~torch_depth_sr.model.initial_estimate`): the colour-guided filter and its
+    settings, whether measured values are kept, whether Q⁰ comes from a singular test, and the sided hole fill
+    (``None`` = off; ``config.extra["sided_fill"]`` and ``["sided_fill_params"]``). Flat fields ``init_*``."""
+
+    fill: str
+    keep_observed: bool
+    singular: bool
+    kernel_size: int
+    sigma_space: float
+    sigma_color: float
+    dt_sigma_space: float
+    dt_sigma_color: float
+    dt_iterations: int
+    sided_fill: Optional[SidedFillConfig]
+    _FLAT: ClassVar[dict] = _prefixed("init_", "fill", "keep_observed", "singular", "kernel_size", "sigma_space",
+                                      "sigma_color", "dt_sigma_space", "dt_sigma_color", "dt_iterations")
+
+    @classmethod
+    def from_config(cls, c: RestorerConfig) -> "InitConfig":
+        sided = None
+        if bool(c.extra.get("sided_fill", True)) and c.init_fill != "pushpull":
+            params = c.extra.get("sided_fill_params", {})
+            allowed = [f.name for f in dataclasses.fields(SidedFillConfig)]
+            if not isinstance(params, dict) or set(params) - set(allowed):
+                raise ParameterError('extra["sided_fill_params"]', params, f"a dict with some of {allowed}")
+            sided = SidedFillConfig(**params)
+        return cls(**{g: getattr(c, f) for g, f in cls._FLAT.items()}, sided_fill=sided)
+
+
+@dataclass(frozen=True)
+class JBUConfig:
+    """Joint bilateral upsampling of x⁰ (:func:`~torch_depth_sr.guided_filters.joint_bilateral_upsample`;
+    the defaults are that function's)."""
+
+    radius: int = 2
+    sigma_space: float = 1.0
+    sigma_color: float = 0.1
+
+
+@dataclass(frozen=True)
+class LayerMultipliers:
+    """Multipliers on the layer weights under guided upsampling (1 = unchanged)."""
+
+    lam: float = 1.0
+    eta: float = 1.0
+    gamma: float = 1.0
+    mu1: float = 1.0
+    mu2: float = 1.0
+
+
+@dataclass(frozen=True)
+class UpsamplingConfig(_Group):
+    """Guided upsampling: the degradation ``K`` (``"area"`` or ``"bicubic"``, built by
+    :func:`~torch_depth_sr.operators.degradation_operator`), x⁰ on the fine grid (``init``: ``"jbu"`` held within
+    ``init_band`` noise σ of bicubic interpolation, or ``"bicubic"``) and the layer weights' policy
+    (:meth:`layer_weights`). Flat fields ``degradation`` and ``upsample_*``."""
+
+    degradation: str
+    init: str
+    init_band: float
+    jbu: JBUConfig
+    tv_per_factor: bool
+    multipliers: LayerMultipliers
+    _FLAT: ClassVar[dict] = {"degradation": "degradation", "init": "upsample_init", "init_band": "upsample_init_band",
+                             "jbu": "upsample_jbu", "tv_per_factor": "upsample_tv_per_factor",
+                             "multipliers": "upsample_scale"}
+
+    @classmethod
+    def from_config(cls, c: RestorerConfig) -> "UpsamplingConfig":
+        return cls(degradation=c.degradation, init=c.upsample_init, init_band=c.upsample_init_band,
+                   jbu=JBUConfig(**c.upsample_jbu), tv_per_factor=c.upsample_tv_per_factor,
+                   multipliers=LayerMultipliers(**c.upsample_scale))
+
+    def to_flat(self) -> dict:
+        d = super().to_flat()
+        d["upsample_jbu"] = dataclasses.asdict(self.jbu)
+        d["upsample_scale"] = dataclasses.asdict(self.multipliers)
+        return d
+
+    def layer_weights(self, degradation, lam, eta, gamma, mu1, mu2) -> tuple:
+        """The layer's (λ, η, γ, μ₁, μ₂) for the degradation ``K``: unchanged when ``K = I``; under guided
+        upsampling each times its multiplier, and λ divided by ``s = K.scale`` with ``tv_per_factor`` (TV of an
+        s-times finer grid grows like s for the same surface; the quadratic terms do not)."""
+        weights = (lam, eta, gamma, mu1, mu2)
+        if degradation.is_identity:
+            return weights
+        m = self.multipliers
+        lam, eta, gamma, mu1, mu2 = (v * float(f) for v, f in zip(weights, (m.lam, m.eta, m.gamma, m.mu1, m.mu2)))
+        if self.tv_per_factor:
+            lam = lam / degradation.scale
+        return lam, eta, gamma, mu1, mu2
 
 
 def load_config_file(path: str | Path) -> RestorerConfig:

@@ -6,6 +6,9 @@ Objective (paper eq. 2-8, restored in model.md):
     \min_{x,e}\ \tfrac12\|Q\odot(y-Kx-e)\|^2 + \lambda\|Dx\|_1 + \eta\|Dx-\alpha\|_1 + \gamma\|e\|_1
 
 solved by half-quadratic splitting, one :class:`~torch_depth_sr.layers.UnrolledLayer` per iteration.
+The task is the degradation ``K`` (:func:`~torch_depth_sr.operators.degradation_operator`: the identity for
+denoising, area or bicubic downsampling by ``s`` for guided upsampling), built once per forward from the
+config's ``degradation`` and the sizes of the inputs and handed to the initial estimate and every layer.
 """
 from __future__ import annotations
 
@@ -20,14 +23,15 @@ from torch import nn
 
 from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import ABLATIONS, PRESETS, RestorerConfig, load_config_file
+from .config import (ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, InitConfig, RestorerConfig, UpsamplingConfig,
+                     load_config_file)
 from .errors import DepthSRError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .fill import fill_holes
 from .layers import RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage
 from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
-from .operators import BicubicDownsample, grad
+from .operators import Degradation, area_downsample, degradation_operator, grad
 
 __all__ = [
     "RestorationResult",
@@ -69,6 +73,10 @@ class DepthRestorer(nn.Module):
         trainable: whether the parameters require grad.
         **overrides: fields of the config to change, e.g. ``num_layers=4`` or ``use_nonlocal=False``.
 
+    The model and its layers take their settings groups (:mod:`torch_depth_sr.config`) from the config when
+    they are built: to change a setting, build a new model (``DepthRestorer(model.config.replace(...))``)
+    and load the state dict into it.
+
     Examples:
         >>> from torch_depth_sr.datasets.synthetic import make_scene
         >>> s = make_scene(64, 80, seed=0)
@@ -84,6 +92,10 @@ class DepthRestorer(nn.Module):
         if config.num_layers < 1:
             raise ValueError(f"num_layers must be >= 1; got {config.num_layers}.")
         self.config = config
+        # the settings groups of the stages the model runs itself (x⁰, Q⁰, the first matches); the layers hold theirs
+        self.terms, self.initial, self.upsampling = config.layer, config.initial, config.upsampling
+        self.block_matching, self.singular = config.block_matching, config.singular
+        self.fidelity_band = config.fidelity_band
         self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
         self.log_temperature = nn.Parameter(torch.tensor(config.temperature).log(), requires_grad=trainable)
         # ρ weighs colour in the block distance, which picks the matches: a discrete choice with no gradient, so
@@ -127,7 +139,8 @@ class DepthRestorer(nn.Module):
         b, _, h, w = y.shape
         guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
         factor = _infer_factor(y, guide, scale_factor)
-        bs = self.config.block_size
+        K = degradation_operator(self.upsampling.degradation, factor)  # the task, handed to every stage
+        bs = self.block_matching.block_size
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
                              f"{bs}x{bs}, the block size used by block matching.")
@@ -145,7 +158,7 @@ class DepthRestorer(nn.Module):
             torch.cuda.synchronize(y.device)
         t0 = time.perf_counter()
         with torch.set_grad_enabled(grad_needed):
-            state, ctx = self._initial_state(yn, observed, guide, factor, noise=sigma / scale, grid_step=step / scale,
+            state, ctx = self._initial_state(yn, observed, guide, K, noise=sigma / scale, grid_step=step / scale,
                                              timings={} if timed else None)
             for layer in self.layers:
                 state = layer(state, ctx)
@@ -154,12 +167,12 @@ class DepthRestorer(nn.Module):
                 torch.cuda.synchronize(state.x.device)
             state.timings["total"] = time.perf_counter() - t0
         x = state.x
-        if factor == 1 and self.config.fidelity_band > 0:
-            band = noise_band(step / scale, sigma / scale, self.config.fidelity_band)  # in units of the scale
+        if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
+            band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)
         x = x * s4 + o4
         if fill == "trusted":
-            x = _leave_unconfident_missing(x, ctx, observed, factor, layout)
+            x = _leave_unconfident_missing(x, ctx, observed, layout)
         out = restore_layout(x, layout)
         if not return_details:
             return out
@@ -171,39 +184,39 @@ class DepthRestorer(nn.Module):
                                    for t in (state.confidence * observed, state.q, state.e * s4))
         return RestorationResult(out, conf, trusted, outliers, info)
 
-    def _initial_state(self, yn, observed, guide, factor, noise=None, grid_step=None, timings=None):
-        c = self.config
-        ctx = RestorationContext(y=yn, observed=observed, rgb=guide, factor=factor, config=c,
+    def _initial_state(self, yn, observed, guide, K: Degradation, noise=None, grid_step=None, timings=None):
+        terms, init = self.terms, self.initial
+        ctx = RestorationContext(y=yn, observed=observed, rgb=guide, K=K,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp(),
-                                 grid_step=grid_step,
-                                 degradation=BicubicDownsample(factor) if c.degradation == "bicubic" else None)
-        # colour-guided estimate, every pixel; holes at depth gaps filled from one side (fill_holes_sided)
-        guided, ctx.fill_confident, _ = initial_estimate(yn, observed, guide, factor, c, return_fill=True)
-        keep = c.init_keep_observed and guided is not None
+                                 grid_step=grid_step)
+        # colour-guided estimate on the observation grid, every pixel; holes at depth gaps filled from one side
+        guided, ctx.fill_confident, _ = initial_estimate(yn, observed, guide, K.scale, init, return_fill=True)
+        keep = init.keep_observed and guided is not None
         x0 = torch.where(observed > 0, yn, guided) if keep else guided
         b = yn.shape[0]
         matches, q, conf = None, observed, observed
-        detect_first = c.use_singular and factor == 1 and c.init_singular and guide is not None
+        # the singular test compares the estimate with the observation pixel by pixel: K = I only
+        detect_first = terms.use_singular and K.is_identity and init.singular and guide is not None
         if detect_first:
             # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
             # those of the raw input; singular pixels start from the guided value instead of y.
             with stage(timings, "block_matching", yn.device):
-                matches = run_block_matching(guided, ctx, observed)
+                matches = run_block_matching(guided, ctx, observed, self.block_matching)
             with stage(timings, "singular", yn.device):
-                q, conf = singular_test(ctx, guided, matches)
+                q, conf = singular_test(ctx, guided, matches, self.singular)
             x0 = torch.where(q > 0, yn, guided)
             matches = None  # match again on x⁰ for the nonlocal term
-        if factor > 1:
-            x0 = upsample_initial(x0, observed, guide, factor, c, noise=noise)
-        elif guide is not None and c.guided_prior > 0:
+        if not K.is_identity:  # x⁰ to the output grid
+            x0 = upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise)
+        elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
             ctx.prior = guided
         _, _, hh, ww = x0.shape
         zeros2 = x0.new_zeros(b, 2, hh, ww)
         alpha = zeros2
-        if matches is None and (c.use_nonlocal or (c.use_singular and factor == 1)):
+        if matches is None and (terms.use_nonlocal or (terms.use_singular and K.is_identity)):
             with stage(timings, "block_matching", x0.device):
-                matches = run_block_matching(x0, ctx, observed)
-        if c.use_nonlocal:
+                matches = run_block_matching(x0, ctx, observed, self.block_matching)
+        if terms.use_nonlocal:
             alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
         state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=q,
                                  confidence=conf, matches=matches, cg_iterations=[], timings=timings)
@@ -257,52 +270,49 @@ class DepthRestorer(nn.Module):
         return cls.load(root / name, trainable=trainable, map_location=map_location)
 
 
-# Depth-gap-aware hole fill of x⁰ (torch_depth_sr.fill.fill_holes_sided), switched and tuned through
-# ``config.extra``: ``{"sided_fill": False}`` restores the plain masked-JBF / push-pull fill of the holes;
-# ``{"sided_fill_params": {...}}`` overrides the arguments below (gap in noise-σ units of the normalised depth).
-SIDED_FILL_DEFAULTS = dict(gap=4.0, min_share=0.75, passes=8, choice_sigma_space=1.5, ambiguous="mix")
-
-
-def initial_estimate(yn, observed, guide, factor: int, c: RestorerConfig, return_fill: bool = False):
+def initial_estimate(yn, observed, guide, factor: int, c: InitConfig | RestorerConfig, return_fill: bool = False):
     """x⁰ on the observation grid: a colour-guided normalised convolution, or push-pull without colour.
 
-    ``config.init_fill``: ``"domain"`` — masked domain-transform filter
-    (:func:`~torch_depth_sr.guided_filters.domain_transform_filter`, ``init_dt_*``); ``"jbf"`` — masked joint
-    bilateral filter (:func:`~torch_depth_sr.guided_filters.joint_bilateral_filter`, ``init_kernel_size``,
-    ``init_sigma_*``); ``"pushpull"`` (or no guide) — :func:`~torch_depth_sr.fill.fill_holes`.
-    Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` (unless ``config.extra["sided_fill"]``
-    is False, or ``init_fill == "pushpull"``): a hole next to a depth gap takes the values of one side.
-    With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}: ``confident`` =
-    measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from one side.
+    ``c`` is the :class:`~torch_depth_sr.config.InitConfig` (or a whole :class:`RestorerConfig`, whose
+    ``initial`` group is used); ``factor`` is the ratio of the guide's grid to the depth's (the guide is
+    area-averaged to the depth's grid). ``c.fill``: ``"domain"`` — masked domain-transform filter
+    (:func:`~torch_depth_sr.guided_filters.domain_transform_filter`, ``dt_*``); ``"jbf"`` — masked joint
+    bilateral filter (:func:`~torch_depth_sr.guided_filters.joint_bilateral_filter`, ``kernel_size``,
+    ``sigma_*``); ``"pushpull"`` (or no guide) — :func:`~torch_depth_sr.fill.fill_holes`.
+    Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` (unless ``c.sided_fill`` is None:
+    ``config.extra["sided_fill"]`` False, or ``init_fill == "pushpull"``): a hole next to a depth gap takes the
+    values of one side. With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}:
+    ``confident`` = measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from
+    one side.
     """
     from .fill import fill_holes_sided
     from .guided_filters import domain_transform_filter, joint_bilateral_filter
 
-    sided = bool(c.extra.get("sided_fill", True)) and c.init_fill != "pushpull"
-    if guide is None or c.init_fill == "pushpull":
+    if isinstance(c, RestorerConfig):
+        c = c.initial
+    if guide is None or c.fill == "pushpull":
         est = fill_holes(yn, observed)
         g = None
     else:
-        g = guide if factor == 1 else F.avg_pool2d(guide, factor)
-        if c.init_fill == "domain":
-            est = domain_transform_filter(yn, g, observed, sigma_space=c.init_dt_sigma_space,
-                                          sigma_color=c.init_dt_sigma_color, iterations=c.init_dt_iterations)
-        elif c.init_fill == "jbf":
-            kernel = min(c.init_kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
+        g = area_downsample(guide, factor)  # the guide on the depth's grid (a copy when factor = 1)
+        if c.fill == "domain":
+            est = domain_transform_filter(yn, g, observed, sigma_space=c.dt_sigma_space,
+                                          sigma_color=c.dt_sigma_color, iterations=c.dt_iterations)
+        elif c.fill == "jbf":
+            kernel = min(c.kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
             kernel -= 1 - kernel % 2
-            est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.init_sigma_space,
-                                         sigma_color=c.init_sigma_color)
+            est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.sigma_space,
+                                         sigma_color=c.sigma_color)
         else:
-            raise ValueError(f"init_fill={c.init_fill!r}; allowed are 'domain', 'jbf' and 'pushpull'.")
+            raise ValueError(f"init_fill={c.fill!r}; allowed are 'domain', 'jbf' and 'pushpull'.")
     confident = torch.ones_like(observed)
     one_side = torch.zeros_like(observed)
-    if sided and not bool((observed > 0).all()):
-        params = {**SIDED_FILL_DEFAULTS, **c.extra.get("sided_fill_params", {})}
-        ambiguous = params.pop("ambiguous")
-        kernel = max(3, min(c.init_kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
+    if c.sided_fill is not None and not bool((observed > 0).all()):
+        ambiguous = c.sided_fill.ambiguous
+        kernel = max(3, min(c.kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
         with torch.no_grad():
-            r = fill_holes_sided(yn.detach(), observed, g, kernel_size=kernel, sigma_space=c.init_sigma_space,
-                                 sigma_color=c.init_sigma_color, **params)
+            r = fill_holes_sided(yn.detach(), observed, g, kernel_size=kernel, sigma_space=c.sigma_space,
+                                 sigma_color=c.sigma_color, **c.sided_fill.fill_arguments())
         # ambiguous="mix": a hole whose side is not clear keeps the weighted mean of both (marked unconfident)
         take = (r.confident > 0) | (ambiguous != "mix") | (g is None)
         hole = observed <= 0
@@ -321,35 +331,40 @@ def _check_fill(fill) -> None:
                          "holes whose fill is not confident as missing (0 for integer output, NaN for float).")
 
 
-def _leave_unconfident_missing(x, ctx, observed, factor: int, layout):
+def _leave_unconfident_missing(x, ctx, observed, layout):
     """``fill="trusted"``: holes whose fill is not confident become 0 (integer output) or NaN (float)."""
     ok = ctx.fill_confident
     if ok is None:
         return x
     missing = (observed <= 0) & (ok <= 0)  # (B,1,h,w)
-    if factor > 1:
-        missing = F.interpolate(missing.to(x.dtype), scale_factor=factor, mode="nearest") > 0
+    s = ctx.K.scale  # each observation pixel covers s×s output pixels
+    missing = F.interpolate(missing.to(x.dtype), scale_factor=s, mode="nearest") > 0
     return x.masked_fill(missing, 0.0 if _is_integer_dtype(layout.dtype) else float("nan"))
 
 
-def upsample_initial(x0_lr, observed, guide, factor: int, c: RestorerConfig,
+def upsample_initial(x0_lr, observed, guide, factor: int, c: UpsamplingConfig | RestorerConfig,
                      noise: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """x⁰ on the high-resolution grid: joint bilateral upsampling (Kopf et al. 2007) or bicubic.
+    """x⁰ on the high-resolution grid (``factor`` times finer): joint bilateral upsampling (Kopf et al. 2007)
+    or bicubic, by the :class:`~torch_depth_sr.config.UpsamplingConfig` ``c`` (or a whole config's
+    ``upsampling`` group).
 
-    With ``config.upsample_init_band = c > 0`` and the noise level ``noise (B,)`` (in the units of ``x0_lr``),
-    the joint bilateral result may differ from bicubic interpolation by at most ``c·noise``: it removes noise,
-    but on a clean input its colour edges would move the depth edges (issue 12: ×4 on clean input it was worse
-    than bicubic interpolation).
+    With ``c.init_band = b > 0`` and the noise level ``noise (B,)`` (in the units of ``x0_lr``), the joint
+    bilateral result may differ from bicubic interpolation by at most ``b·noise``: it removes noise, but on a
+    clean input its colour edges would move the depth edges (issue 12: ×4 on clean input it was worse than
+    bicubic interpolation).
     """
+    if isinstance(c, RestorerConfig):
+        c = c.upsampling
     bicubic = F.interpolate(x0_lr, scale_factor=factor, mode="bicubic", align_corners=False)
-    if c.upsample_init == "bicubic" or guide is None:
+    if c.init == "bicubic" or guide is None:
         return bicubic
     from .guided_filters import joint_bilateral_upsample
 
-    jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), **c.upsample_jbu)
-    if c.upsample_init_band <= 0 or noise is None:
+    jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), radius=c.jbu.radius,
+                                   sigma_space=c.jbu.sigma_space, sigma_color=c.jbu.sigma_color)
+    if c.init_band <= 0 or noise is None:
         return jbu
-    band = (c.upsample_init_band * noise).to(jbu).view(-1, 1, 1, 1)
+    band = (c.init_band * noise).to(jbu).view(-1, 1, 1, 1)
     return bicubic + torch.maximum(torch.minimum(jbu - bicubic, band), -band)
 
 

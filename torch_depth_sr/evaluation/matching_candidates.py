@@ -48,9 +48,9 @@ def _recording(calls: list):
     """Record the inputs of every block-matching pass of the model."""
     original = layers.run_block_matching
 
-    def record(x, ctx, q, previous=None):
-        m = original(x, ctx, q, previous)
-        calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if ctx.factor == 1 else None,
+    def record(x, ctx, q, settings, previous=None):
+        m = original(x, ctx, q, settings, previous)
+        calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if ctx.K.is_identity else None,
                           rgb=ctx.rgb, previous=previous, exact=m, ctx=ctx))
         return m
 
