@@ -183,3 +183,15 @@ def test_paper_ablation_switches_every_extension_off():
     assert c.use_nonlocal and c.use_outliers and c.use_singular
     with pytest.raises(ValueError, match="paper"):
         DepthRestorer.ablation("papers")
+
+
+def test_paper_model_runs_as_a_bench_method():
+    from torch_depth_sr.datasets.synthetic import make_scene
+    from torch_depth_sr.evaluation.methods import run_method
+
+    s = make_scene(32, 32, seed=1)
+    sample = {"depth": s["gt"] + torch.randn(s["gt"].shape, generator=torch.Generator().manual_seed(0)),
+              "rgb": s["rgb"]}
+    out = run_method("paper-model", sample, config={"num_layers": 2, "search_window": 7})
+    assert out.shape == (1, 1, 32, 32) and bool(torch.isfinite(out).all())
+    assert float((out - s["gt"]).pow(2).mean()) < float((sample["depth"] - s["gt"]).pow(2).mean())

@@ -59,6 +59,8 @@ def _model(name: str, device: str, overrides: str = "{}"):
         return DepthRestorer.from_pretrained("upsample-x4").to(device)
     if name == "full-fast":
         return DepthRestorer.preset("fast", **json.loads(overrides)).to(device)
+    if name == "paper-model":  # the paper's model without the library's extensions (ablation "paper")
+        return DepthRestorer.ablation("paper", **json.loads(overrides)).to(device)
     return DepthRestorer.ablation(name, **json.loads(overrides)).to(device)
 
 
@@ -97,7 +99,7 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             from ..baselines import dictionary_denoise
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
-        if name in ("tv", "tv+nl", "full", "full-fast", "trained", "trained-x4"):
+        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-x4"):
             return _model(name, device, json.dumps(config or {}, sort_keys=True))(y, rgb)
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
-                     "and 'full-fast', 'trained', 'trained-x4'.")
+                     "and 'full-fast', 'paper-model', 'trained', 'trained-x4'.")
