@@ -195,3 +195,22 @@ def test_paper_model_runs_as_a_bench_method():
     out = run_method("paper-model", sample, config={"num_layers": 2, "search_window": 7})
     assert out.shape == (1, 1, 32, 32) and bool(torch.isfinite(out).all())
     assert float((out - s["gt"]).pow(2).mean()) < float((sample["depth"] - s["gt"]).pow(2).mean())
+
+
+def test_eta_clean_acts_only_on_samples_the_singular_gate_finds_clean():
+    from torch_depth_sr import DepthRestorer
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(48, 48, seed=2)
+    g = torch.Generator().manual_seed(0)
+    clean = s["gt"] + 2 * torch.randn(s["gt"].shape, generator=g)
+    spiky = clean.clone()
+    spots = torch.rand(spiky.shape, generator=g) < 0.03  # 3 % impulses: far above the gate's 0.2 %
+    spiky[spots] = 255.0
+    y = torch.stack([clean, spiky])
+    rgb = s["rgb"][None].expand(2, -1, -1, -1)
+    kw = dict(num_layers=3, search_window=9)
+    a = DepthRestorer(eta_clean=1.0, **kw)(y, rgb)
+    b = DepthRestorer(eta_clean=0.25, **kw)(y, rgb)
+    assert torch.equal(a[1], b[1])  # outliers found: η as configured
+    assert float((a[0] - b[0]).abs().max()) > 1e-3  # no outliers: η × eta_clean from the second layer on

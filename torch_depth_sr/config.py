@@ -53,6 +53,9 @@ class RestorerConfig:
     # initial values of each layer's parameters (softplus-positive when trainable)
     lam: float = 1.0  # λ: TV weight
     eta: float = 2.0  # η: nonlocal-gradient weight
+    # η is multiplied by this on samples whose singular test (its gate) finds no outliers, from the layer after the
+    # first test on: there α (a mean over matched blocks) blurs edges more than it helps (1 = off)
+    eta_clean: float = 0.25
     gamma: float = 3.0  # γ: sparse outlier threshold
     mu1: float = 2.0  # μ₁: splitting weight for z ≈ Dx
     mu2: float = 0.5  # μ₂: splitting weight for w ≈ Dx − α
@@ -258,6 +261,7 @@ class LayerConfig(_Group):
 
     lam: float
     eta: float
+    eta_clean: float
     gamma: float
     mu1: float
     mu2: float
@@ -267,8 +271,8 @@ class LayerConfig(_Group):
     use_singular: bool
     guided_prior: float
     prior_on_singular: bool
-    _FLAT: ClassVar[dict] = _same("lam", "eta", "gamma", "mu1", "mu2", "isotropic", "use_nonlocal", "use_outliers",
-                                  "use_singular", "guided_prior", "prior_on_singular")
+    _FLAT: ClassVar[dict] = _same("lam", "eta", "eta_clean", "gamma", "mu1", "mu2", "isotropic", "use_nonlocal",
+                                  "use_outliers", "use_singular", "guided_prior", "prior_on_singular")
 
 
 @dataclass(frozen=True)
@@ -606,7 +610,7 @@ _positive = _real(0.0)
 _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "num_layers": _int(1),
     # the layer parameters are softplus-positive (0 would be a raw value of −inf)
-    "lam": _positive, "eta": _positive, "gamma": _positive, "mu1": _positive, "mu2": _positive,
+    "lam": _positive, "eta": _positive, "eta_clean": _positive, "gamma": _positive, "mu1": _positive, "mu2": _positive,
     "isotropic": _bool,
     "init_fill": _choice("domain", "jbf", "pushpull"),
     "guided_prior": _real(0.0, lo_open=False),

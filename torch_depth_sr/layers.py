@@ -109,6 +109,8 @@ class RestorationContext:
     # (B,1,h,w) bool: measured pixels with enough agreeing measured neighbours (SingularConfig.support), which
     # the singular test always trusts; depends on y only, so the first test computes it (supported_pixels)
     supported: Optional[torch.Tensor] = None
+    # (B,1,1,1) bool: samples the last singular test's gate found free of singular pixels (None before a test)
+    clean: Optional[torch.Tensor] = None
 
 
 def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor, settings: BlockMatchingConfig,
@@ -168,6 +170,8 @@ class UnrolledLayer(nn.Module):
         dx = grad(s.x)  # (B,2,H,W)
         z = shrink(dx, lam / mu1)
         if t.use_nonlocal:
+            if ctx.clean is not None and t.eta_clean != 1.0:  # samples without outliers: α matters less
+                eta = eta * torch.where(ctx.clean, torch.full_like(eta, t.eta_clean), torch.ones_like(eta))
             w = soft_threshold(dx - s.alpha, eta / mu2)
         else:
             w, mu2 = s.w, torch.zeros_like(mu2)
@@ -231,6 +235,7 @@ def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatche
             share = gross.sum(1) / obs.sum(1).clamp_min(1)  # (B,)
             clean = (share < c.gate).view(-1, 1, 1, 1)
             q = torch.where(clean, ctx.observed.to(q.dtype), q)
+            ctx.clean = clean
     return q.to(x.dtype), conf.to(x.dtype)
 
 
