@@ -197,7 +197,8 @@ def test_paper_model_runs_as_a_bench_method():
     assert float((out - s["gt"]).pow(2).mean()) < float((sample["depth"] - s["gt"]).pow(2).mean())
 
 
-def test_eta_clean_acts_only_on_samples_the_singular_gate_finds_clean():
+@pytest.mark.parametrize("setting", [{"eta_clean": 1.0}, {"nl_value_range_clean": 0.0}])
+def test_clean_sample_settings_act_only_on_samples_the_singular_gate_finds_clean(setting):
     from torch_depth_sr import DepthRestorer
     from torch_depth_sr.datasets.synthetic import make_scene
 
@@ -210,7 +211,7 @@ def test_eta_clean_acts_only_on_samples_the_singular_gate_finds_clean():
     y = torch.stack([clean, spiky])
     rgb = s["rgb"][None].expand(2, -1, -1, -1)
     kw = dict(num_layers=3, search_window=9)
-    a = DepthRestorer(eta_clean=1.0, **kw)(y, rgb)
-    b = DepthRestorer(eta_clean=0.25, **kw)(y, rgb)
-    assert torch.equal(a[1], b[1])  # outliers found: η as configured
-    assert float((a[0] - b[0]).abs().max()) > 1e-3  # no outliers: η × eta_clean from the second layer on
+    a = DepthRestorer(**setting, **kw)(y, rgb)  # the setting off
+    b = DepthRestorer(**kw)(y, rgb)  # the defaults: eta_clean 0.25, nl_value_range_clean 1
+    assert torch.equal(a[1], b[1])  # outliers found: η and r as configured for every sample
+    assert float((a[0] - b[0]).abs().max()) > 1e-3  # no outliers: the clean-sample values from the second layer on

@@ -122,6 +122,8 @@ class RestorerConfig:
     nl_value_ridge: float = 1.0
     # the centres also weighed by exp(−(x_j − x_i)²/2r²), r in noise σ: an edge-stopping range kernel (0 = off)
     nl_value_range: float = 3.0
+    # ... r on samples whose singular gate finds no outliers, from the layer after the first test (0 = as above)
+    nl_value_range_clean: float = 1.0
     # singular pixel detection
     singular_tau: float = 0.5
     singular_sigma_floor: float = 2.5
@@ -303,7 +305,8 @@ class ValuePriorConfig(_Group):
     offset: float
     ridge: float
     range: float
-    _FLAT: ClassVar[dict] = _prefixed("nl_value_", "weight", "var", "offset", "ridge", "range")
+    range_clean: float
+    _FLAT: ClassVar[dict] = _prefixed("nl_value_", "weight", "var", "offset", "ridge", "range", "range_clean")
 
 
 @dataclass(frozen=True)
@@ -625,6 +628,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "nl_value_offset": _real(0.0),
     "nl_value_ridge": _real(0.0, lo_open=False),
     "nl_value_range": _real(0.0, lo_open=False),
+    "nl_value_range_clean": _real(0.0, lo_open=False),
     "upsample_init_band": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,

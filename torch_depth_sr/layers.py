@@ -190,7 +190,7 @@ class UnrolledLayer(nn.Module):
                 new_alpha, diag, target = nonlocal_terms(
                     s.x, dx if t.use_nonlocal else None, matches, value_weight=vp.weight if value_prior else 0.0,
                     max_var=vp.var, max_offset=vp.offset, plane_ridge=vp.ridge,
-                    range_sigma=vp.range if vp.range > 0 else None)
+                    range_sigma=_range_sigma(vp, ctx.clean))
             if t.use_nonlocal:
                 alpha = new_alpha
         if t.use_singular and K.is_identity:
@@ -212,6 +212,16 @@ class UnrolledLayer(nn.Module):
 
     def extra_repr(self) -> str:
         return f"index={self.index}, " + ", ".join(f"{k}={v:.3g}" for k, v in self.values().items())
+
+
+def _range_sigma(vp, clean: Optional[torch.Tensor]):
+    """The value prior's range σ: ``vp.range``, or per sample ``vp.range_clean`` where the singular gate found
+    no outliers (``clean``, (B,1,1,1)); None when off."""
+    if vp.range <= 0:
+        return None
+    if clean is None or vp.range_clean <= 0:
+        return vp.range
+    return torch.where(clean, float(vp.range_clean), float(vp.range))
 
 
 def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatches, settings: SingularConfig):
