@@ -25,7 +25,7 @@ for size in args.sizes:
     for precondition in (True, False):
         model = DepthRestorer(precondition=precondition)
         model(y, rgb)  # warm-up (compiles the C kernel on first use)
-        info = model(y, rgb, return_details=True).info
+        info = model.restore_with_details(y, rgb, timings=True).info
         sec = info["seconds"]
         rest = sec["total"] - sum(v for k, v in sec.items() if k != "total")
         print(f"{size} precondition={precondition}: " + ", ".join(f"{k} {v:.3f}s" for k, v in sec.items())

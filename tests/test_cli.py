@@ -46,6 +46,22 @@ def test_demo_writes_json_and_figure(tmp_path):
     assert {r["method"] for r in d["results"]} == {"input", "tv", "full"} and (tmp_path / "demo.png").exists()
 
 
+def test_demo_fails_when_the_model_does_not_beat_its_ablation(tmp_path, monkeypatch, capsys):
+    """The demo's quality check is an error: a "full" model that returns its input makes it exit 1."""
+    import torch_depth_sr.model as model_module
+
+    real = model_module.DepthRestorer
+
+    class Broken:
+        @staticmethod
+        def ablation(name, **kw):
+            return (lambda y, rgb: y.clone()) if name == "full" else real.ablation(name, **kw)
+
+    monkeypatch.setattr(model_module, "DepthRestorer", Broken)  # cmd_demo imports it when it runs
+    assert main(["demo", "--out", str(tmp_path), "--height", "64", "--width", "80"]) == 1
+    assert "expected RMSE(full) < RMSE(tv) < RMSE(input)" in capsys.readouterr().err
+
+
 def test_bench_config_overrides_reach_the_model_and_bad_ones_are_refused():
     from torch_depth_sr.datasets.synthetic import make_scene
     from torch_depth_sr.evaluation.bench import _parse_config

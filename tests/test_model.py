@@ -3,6 +3,7 @@ import pytest
 import torch
 
 from torch_depth_sr import DepthRestorer, RestorerConfig, restore_depth
+from torch_depth_sr.errors import DepthSRError, DTypeError, ShapeError
 
 
 def rmse(pred, gt, mask):
@@ -32,18 +33,43 @@ class TestDepthRestorer:
         out = m(scene["depth"], scene["rgb"])
         loss = ((out - scene["gt"]) ** 2 * scene["mask"]).mean()
         loss.backward()
-        names = {n for n, p in m.named_parameters() if p.requires_grad}
-        assert names == {n for n, _ in m.named_parameters()}
-        for layer in m.layers:
-            for n in ("lam", "eta", "gamma", "mu1", "mu2"):
-                g = getattr(layer, "raw_" + n).grad
-                assert g is not None and torch.isfinite(g), (layer.index, n)
-        assert m.log_temperature.grad is not None
+        expected = {f"layers.{i}.raw_{n}" for i in range(SMALL["num_layers"])
+                    for n in ("lam", "eta", "gamma", "mu1", "mu2")} | {"log_temperature"}
+        assert {n for n, p in m.named_parameters() if p.requires_grad} == expected  # ρ is a buffer: it picks matches
+        got = {n for n, p in m.named_parameters() if p.grad is not None and bool(torch.isfinite(p.grad).all())}
+        assert got == expected
 
-    def test_module_equals_functional(self, scene):
-        a = DepthRestorer(**SMALL)(scene["depth"], scene["rgb"])
-        b = restore_depth(scene["depth"], scene["rgb"], **SMALL)
-        torch.testing.assert_close(a, b)
+    def test_functional_handles_layouts_and_runs_the_given_model(self, scene):
+        m = DepthRestorer(**SMALL)
+        a = m(scene["depth"], scene["rgb"])  # (B,1,H,W) float tensors: the module
+        hw = restore_depth(scene["depth"][0, 0].numpy(), scene["rgb"][0].numpy(), model=m)  # (H,W) numpy
+        assert isinstance(hw, np.ndarray) and hw.shape == tuple(scene["depth"].shape[-2:])
+        torch.testing.assert_close(torch.from_numpy(hw)[None, None], a, rtol=0, atol=0)
+        other = DepthRestorer(**{**SMALL, "lam": 5 * DepthRestorer().config.lam})
+        assert not torch.equal(restore_depth(scene["depth"], scene["rgb"], model=other), a)  # model= is used
+        with pytest.raises(DepthSRError, match="either a model or the settings"):
+            restore_depth(scene["depth"], scene["rgb"], model=m, num_layers=2)
+
+    def test_forward_is_the_depth_of_the_details(self, scene):
+        m = DepthRestorer(**SMALL)
+        r = m.restore_with_details(scene["depth"], scene["rgb"])
+        assert torch.equal(m(scene["depth"], scene["rgb"]), r.depth)
+        assert r.info["seconds"] == {}  # timing is opt-in
+        assert set(m.restore_with_details(scene["depth"], scene["rgb"], timings=True).info["seconds"]) >= {"total"}
+
+    def test_forward_takes_batched_float_tensors_and_forwards_the_rest_with_a_warning(self, scene):
+        m = DepthRestorer(**SMALL)
+        d = scene["depth"]
+        with pytest.warns(DeprecationWarning, match="restore_with_details"):
+            legacy = m(d, scene["rgb"], return_details=True)
+        assert torch.equal(legacy.depth, m(d, scene["rgb"]))
+        with pytest.warns(DeprecationWarning, match="restore_depth"):
+            out = m(d[0, 0].numpy(), scene["rgb"])
+        assert isinstance(out, np.ndarray)
+        with pytest.raises(ShapeError, match="restore_depth"):
+            m.restore_with_details(d[0], scene["rgb"])
+        with pytest.raises(DTypeError, match="restore_depth"):
+            m.restore_with_details(d.round().to(torch.int32), scene["rgb"])
 
     def test_batched_equals_per_sample(self, scene):
         d2 = torch.cat([scene["depth"], scene["depth"].flip(-1)])
@@ -69,10 +95,13 @@ class TestDepthRestorer:
         m = DepthRestorer(**SMALL)
         torch.testing.assert_close(m(d * 1000, c), m(d, c) * 1000, rtol=1e-6, atol=1e-6)
 
-    def test_ablations_share_code_path(self, scene):
-        tv = DepthRestorer.ablation("tv", **SMALL)
-        assert not tv.config.use_nonlocal and not tv.config.use_singular
-        assert torch.isfinite(tv(scene["depth"], scene["rgb"])).all()
+    def test_ablations_switch_terms_off_in_the_same_code_path(self, scene):
+        """The ablations are the one model with terms off, and each term they switch changes the result."""
+        d, c = scene["depth"], scene["rgb"]
+        tv = DepthRestorer.ablation("tv", **SMALL)(d, c)
+        tvnl = DepthRestorer.ablation("tv+nl", **SMALL)(d, c)
+        full = DepthRestorer.ablation("full", **SMALL)(d, c)
+        assert not torch.equal(tv, tvnl) and not torch.equal(tvnl, full)
 
     def test_details(self, scene):
         res = restore_depth(scene["depth"], scene["rgb"], return_details=True, **SMALL)

@@ -1,10 +1,13 @@
-"""Property-based: random shapes, dtypes and 0/NaN patterns give either a library error or finite output."""
+"""Property-based: random shapes, dtypes and 0/NaN patterns give finite output, or one of the documented refusals
+(no measured pixel: InvalidDepthError; smaller than the block size: ShapeError), exactly when it applies."""
 import numpy as np
+import pytest
 import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from torch_depth_sr import DepthSRError, restore_depth
+from torch_depth_sr import RestorerConfig, restore_depth
+from torch_depth_sr.errors import InvalidDepthError, ShapeError
 
 
 @st.composite
@@ -40,10 +43,17 @@ def test_no_crash_and_finite(args):
     if as_torch and depth.dtype != np.uint16:
         depth = torch.from_numpy(depth)
         rgb = torch.from_numpy(rgb).permute(2, 0, 1).float() / 255
-    try:
-        out = restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)
-    except DepthSRError:
+    d = np.asarray(depth, dtype=np.float64)
+    block = RestorerConfig().block_size
+    if not (np.isfinite(d) & (d > 0)).any():
+        with pytest.raises(InvalidDepthError, match="no measured pixel"):
+            restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)
         return
+    if min(d.shape) < block:
+        with pytest.raises(ShapeError, match=f"at least {block}x{block}"):
+            restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)
+        return
+    out = restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)  # any other error fails the test
     arr = out.numpy() if isinstance(out, torch.Tensor) else out
     assert arr.shape == tuple(depth.shape)
     assert np.isfinite(arr.astype(np.float64)).all()

@@ -171,7 +171,8 @@ def _check_rgb_range(t: torch.Tensor, is_int: bool, full_scale: float, orig_dtyp
 
 
 def restore_layout(x: torch.Tensor, layout: DepthLayout) -> Any:
-    """Return ``x (B,1,H,W)`` in the user's layout, dtype, device and array type."""
+    """Return ``x (B,1,H,W)`` in the user's layout, dtype, device and array type (NaN becomes 0 in an integer
+    dtype: "no measurement" in integer depth)."""
     if layout.ndim == 2:
         x = x[0, 0]
     elif layout.ndim == 3:
@@ -182,12 +183,12 @@ def restore_layout(x: torch.Tensor, layout: DepthLayout) -> Any:
         dt = np.dtype(layout.dtype)
         if dt.kind in "ui":
             info = np.iinfo(dt)
-            arr = np.clip(np.rint(arr), max(info.min, 0), info.max)
+            arr = np.clip(np.rint(np.nan_to_num(arr, nan=0.0)), max(info.min, 0), info.max)
         return arr.astype(dt)
     dt = layout.dtype
     if not dt.is_floating_point:
         info = torch.iinfo(dt)
-        x = x.round().clamp(max(info.min, 0), info.max)
+        x = x.nan_to_num(nan=0.0).round().clamp(max(info.min, 0), info.max)
     return x.to(dt)
 
 

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import pickle
 import time
+import warnings
 from pathlib import Path
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple, Optional, Sequence, Union
 
 import torch
 import torch.nn.functional as F
@@ -25,7 +26,7 @@ from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import (ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, InitConfig, RestorerConfig, UpsamplingConfig,
                      load_config_file)
-from .errors import DepthSRError, ModelFileError, ShapeError
+from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .fill import fill_holes
 from .layers import RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage
@@ -41,13 +42,19 @@ __all__ = [
     "FILL_MODES",
     "upsample_initial",
     "restore_depth",
+    "NoiseSigma",
 ]
 
 
-class RestorationResult(NamedTuple):
-    """Result of :func:`restore_depth` with ``return_details=True``.
+NoiseSigma = Union[float, Sequence[float], torch.Tensor, None]
+"""A noise std in depth units: one float, or one per sample (``(B,)``); None = estimate it."""
 
-    ``depth`` is in the input's units, layout and type. ``confidence`` (float in [0,1], on the
+
+class RestorationResult(NamedTuple):
+    """Result of :meth:`DepthRestorer.restore_with_details` (tensors) and of :func:`restore_depth` with
+    ``return_details=True`` (in the input's array type and layout).
+
+    ``depth`` is in the input's units. ``confidence`` (float in [0,1], on the
     observation grid) is the singular-pixel test value P(x_i) at measured pixels and 0 where there
     was no measurement; ``trusted`` is the binary Q; ``outliers`` the sparse residual e in depth
     units. ``info`` holds the noise estimate, scale, CG iterations per layer and timings.
@@ -122,19 +129,83 @@ class DepthRestorer(nn.Module):
             raise ValueError(f"unknown preset {name!r}; allowed are {sorted(PRESETS)}.")
         return cls(**{**PRESETS[name], **overrides})
 
-    def forward(self, depth, rgb=None, mask=None, noise_sigma=None, scale_factor: Optional[int] = None,
-                return_details: bool = False, fill: str = "all", timings: Optional[bool] = None):
-        """Restore ``depth`` guided by ``rgb``; see :func:`restore_depth` for the arguments.
+    def forward(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None, mask: Optional[torch.Tensor] = None,
+                noise_sigma: NoiseSigma = None, scale_factor: Optional[int] = None, fill: str = "all", *,
+                return_details: Optional[bool] = None, timings: Optional[bool] = None) -> torch.Tensor:
+        """The restored depth of ``depth (B,1,H,W)``, a float tensor, guided by ``rgb (B,3,H,W)`` in [0,1].
 
-        ``timings``: record the wall time of each stage in ``info["seconds"]`` (default: when
-        ``return_details``). Timing synchronises CUDA around every stage; an untimed forward does not make the
-        host wait for the device inside the layers.
+        Args:
+            depth: ``(B,1,H,W)`` float16/32/64 tensor, any unit; 0 or NaN = no measurement.
+            rgb: ``(B,3,H,W)`` (or greyscale ``(B,1,H,W)``; batch 1 is broadcast) float tensor in [0,1], aligned with
+                the output grid: ``s`` times larger than ``depth`` for guided upsampling by ``s``. None: no guide.
+            mask: optional validity mask shaped like ``depth`` (nonzero = measured), combined with the 0/NaN rule.
+            noise_sigma: the noise std in depth units, a float or ``(B,)``; estimated from the input when omitted.
+            scale_factor: guided upsampling factor; inferred from the sizes when omitted.
+            fill: ``"all"`` fills every hole; ``"trusted"`` leaves NaN where a hole's fill is not confident.
+
+        Returns:
+            ``(B,1,sH,sW)`` in ``depth``'s dtype, on its device. :meth:`restore_with_details` returns the confidence,
+            trusted set, outliers and run information as well.
+
+        numpy arrays, ``(H,W)``/``(1,H,W)`` layouts and integer dtypes are the business of :func:`restore_depth`
+        (and of :class:`~torch_depth_sr.transforms.RestoreDepth` and the command line), not of the module; passing
+        them here, or ``return_details``/``timings``, still works through :func:`restore_depth` but is deprecated.
         """
+        if return_details is not None or timings is not None or not _is_model_input(depth, rgb, mask):
+            warnings.warn("DepthRestorer.forward takes (B,1,H,W) float tensors and returns the depth only: use "
+                          "model.restore_with_details(...) for the details (timings=True to time the stages) and "
+                          "torch_depth_sr.restore_depth(depth, rgb, model=model) for numpy arrays, (H,W) layouts and "
+                          "integer dtypes. This call was passed on to restore_depth.", DeprecationWarning,
+                          stacklevel=2)
+            return restore_depth(depth, rgb, mask, model=self, noise_sigma=noise_sigma, scale_factor=scale_factor,
+                                 return_details=bool(return_details), fill=fill,
+                                 timings=bool(return_details) if timings is None else bool(timings))
+        out = self._run_tensors(depth, rgb, mask, noise_sigma, scale_factor, fill, timed=False)
+        return out.depth.to(device=depth.device, dtype=depth.dtype)
+
+    def restore_with_details(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None,
+                             mask: Optional[torch.Tensor] = None, noise_sigma: NoiseSigma = None,
+                             scale_factor: Optional[int] = None, fill: str = "all", *,
+                             timings: bool = False) -> "RestorationResult":
+        """:meth:`forward` with the details: a :class:`RestorationResult` of tensors on ``depth``'s device.
+
+        ``depth`` is what :meth:`forward` returns; ``confidence``, ``trusted`` and ``outliers`` are ``(B,1,H,W)`` on
+        the observation grid; ``info`` holds the noise estimate, scale, CG iterations per layer and, with
+        ``timings=True``, the wall time of each stage in ``info["seconds"]`` (timing synchronises CUDA around every
+        stage; without it the layers make the host wait for the device only where the algorithm needs a value).
+
+        Examples:
+            >>> from torch_depth_sr.datasets.synthetic import make_scene
+            >>> s = make_scene(32, 40, seed=0)
+            >>> r = DepthRestorer(num_layers=2).restore_with_details(s["gt"][None] + 1, s["rgb"][None])
+            >>> r.depth.shape, r.confidence.shape, len(r.info["cg_iterations"])
+            (torch.Size([1, 1, 32, 40]), torch.Size([1, 1, 32, 40]), 2)
+        """
+        out = self._run_tensors(depth, rgb, mask, noise_sigma, scale_factor, fill, timed=bool(timings))
+        dev = depth.device
+        return out._replace(depth=out.depth.to(device=dev, dtype=depth.dtype), confidence=out.confidence.detach().to(dev),
+                            trusted=out.trusted.detach().to(dev), outliers=out.outliers.detach().to(dev))
+
+    def _run_tensors(self, depth: torch.Tensor, rgb: Optional[torch.Tensor], mask: Optional[torch.Tensor],
+                     noise_sigma: NoiseSigma, scale_factor: Optional[int], fill: str,
+                     timed: bool) -> "RestorationResult":
+        """Check the tensors at the boundary, then :meth:`_run` (float64 input computes in float64, else float32)."""
         _check_fill(fill)
-        timed = return_details if timings is None else bool(timings)
-        dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
-        y, observed, layout = parse_depth(depth, mask, dtype)
-        dev = self.log_temperature.device  # compute where the model lives; the result goes back to the input's device
+        _check_model_input(depth, rgb, mask)
+        dtype = torch.float64 if depth.dtype == torch.float64 else torch.float32
+        y, observed, _ = parse_depth(depth, mask, dtype)  # validates values: no inf, no negative, something measured
+        return self._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=timed, integer_input=False)
+
+    def _run(self, y: torch.Tensor, observed: torch.Tensor, rgb: Any, noise_sigma: NoiseSigma,
+             scale_factor: Optional[int], fill: str, timed: bool, integer_input: bool) -> "RestorationResult":
+        """The algorithm on parsed input: ``y``, ``observed`` (B,1,H,W) in the compute dtype (0 at missing).
+
+        Returns the :class:`RestorationResult` on the model's device, depth in the compute dtype (NaN where
+        ``fill="trusted"`` leaves a hole missing). ``integer_input``: the values were integers (uint16 millimetres,
+        say), so their grid step is at least 1.
+        """
+        dtype = y.dtype
+        dev = self.log_temperature.device  # compute where the model lives; callers move the result back
         y, observed = y.to(dev), observed.to(dev)
         b, _, h, w = y.shape
         guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
@@ -144,12 +215,12 @@ class DepthRestorer(nn.Module):
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
                              f"{bs}x{bs}, the block size used by block matching.")
-        step = quantisation_step(y, observed, integer_input=_is_integer_dtype(layout.dtype))
+        step = quantisation_step(y, observed, integer_input=integer_input)
         offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
         glitches = implausible(y, observed, scale)
         if bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
             observed = torch.where(glitches, torch.zeros_like(observed), observed)
-            step = quantisation_step(y, observed, integer_input=_is_integer_dtype(layout.dtype))
+            step = quantisation_step(y, observed, integer_input=integer_input)
             offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
         o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
         yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
@@ -172,17 +243,12 @@ class DepthRestorer(nn.Module):
             x = clamp_to_measurements(x, yn, state.q * observed, band)
         x = x * s4 + o4
         if fill == "trusted":
-            x = _leave_unconfident_missing(x, ctx, observed, layout)
-        out = restore_layout(x, layout)
-        if not return_details:
-            return out
+            x = _leave_unconfident_missing(x, ctx, observed)
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
                 "implausible_pixels": glitches.flatten(1).sum(1).tolist(),
                 "cg_iterations": [int(n.max()) for n in state.cg_iterations], "factor": factor,
                 "seconds": dict(state.timings or {})}
-        conf, trusted, outliers = (map_layout(t, layout)
-                                   for t in (state.confidence * observed, state.q, state.e * s4))
-        return RestorationResult(out, conf, trusted, outliers, info)
+        return RestorationResult(x, state.confidence * observed, state.q, state.e * s4, info)
 
     def _initial_state(self, yn, observed, guide, K: Degradation, noise=None, grid_step=None, timings=None):
         terms, init = self.terms, self.initial
@@ -331,15 +397,43 @@ def _check_fill(fill) -> None:
                          "holes whose fill is not confident as missing (0 for integer output, NaN for float).")
 
 
-def _leave_unconfident_missing(x, ctx, observed, layout):
-    """``fill="trusted"``: holes whose fill is not confident become 0 (integer output) or NaN (float)."""
+def _is_model_input(depth: Any, rgb: Any, mask: Any) -> bool:
+    """Whether the arguments are what :meth:`DepthRestorer.forward` takes: 4-D tensors, float depth and colour."""
+    def ok(t: Any, floating: bool = True) -> bool:
+        return isinstance(t, torch.Tensor) and t.ndim == 4 and (t.is_floating_point() or not floating)
+
+    return ok(depth) and (rgb is None or ok(rgb)) and (mask is None or ok(mask, floating=False))
+
+
+def _check_model_input(depth: Any, rgb: Any, mask: Any) -> None:
+    """Refuse what :meth:`DepthRestorer.forward` does not take, saying where it goes instead."""
+    if _is_model_input(depth, rgb, mask):
+        return
+    for name, t in (("depth", depth), ("rgb", rgb), ("mask", mask)):
+        if t is None:
+            continue
+        if not isinstance(t, torch.Tensor):
+            raise DTypeError(f"{name} is a {type(t).__name__}; DepthRestorer takes torch tensors. Use "
+                             "torch_depth_sr.restore_depth(depth, rgb, model=model) for numpy arrays.")
+        if t.ndim != 4:
+            raise ShapeError(f"{name} has shape {tuple(t.shape)}; DepthRestorer takes (B,C,H,W) tensors. Add the "
+                             "batch/channel dims (depth[None, None]) or use torch_depth_sr.restore_depth, which "
+                             "takes (H,W) and (1,H,W) as well.")
+        if name != "mask" and not t.is_floating_point():
+            raise DTypeError(f"{name} has dtype {t.dtype}; DepthRestorer takes float tensors (rgb in [0,1]). Use "
+                             "torch_depth_sr.restore_depth(depth, rgb, model=model) for integer depth or colour "
+                             "(it returns the input's dtype).")
+
+
+def _leave_unconfident_missing(x: torch.Tensor, ctx: RestorationContext, observed: torch.Tensor) -> torch.Tensor:
+    """``fill="trusted"``: holes whose fill is not confident become NaN (0 once written to an integer dtype)."""
     ok = ctx.fill_confident
     if ok is None:
         return x
     missing = (observed <= 0) & (ok <= 0)  # (B,1,h,w)
     s = ctx.K.scale  # each observation pixel covers s×s output pixels
     missing = F.interpolate(missing.to(x.dtype), scale_factor=s, mode="nearest") > 0
-    return x.masked_fill(missing, 0.0 if _is_integer_dtype(layout.dtype) else float("nan"))
+    return x.masked_fill(missing, float("nan"))
 
 
 def upsample_initial(x0_lr, observed, guide, factor: int, c: UpsamplingConfig | RestorerConfig,
@@ -401,10 +495,14 @@ def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Op
     return s
 
 
-def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig] = None, noise_sigma=None,
+def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optional[DepthRestorer] = None,
+                  config: Optional[RestorerConfig] = None, noise_sigma: NoiseSigma = None,
                   scale_factor: Optional[int] = None, return_details: bool = False, fill: str = "all",
-                  **overrides):
-    r"""Restore a depth map in one call (functional form of :class:`DepthRestorer`).
+                  timings: bool = False, **overrides: Any) -> Any:
+    r"""Restore a depth map in one call, in the caller's array type, layout, dtype and units.
+
+    This is where numpy arrays, ``(H,W)``/``(1,H,W)`` layouts and integer dtypes are handled (the model,
+    :class:`DepthRestorer`, works on ``(B,1,H,W)`` float tensors only).
 
     Args:
         depth: ``(B,1,H,W)``, ``(1,H,W)`` or ``(H,W)``, torch or numpy, float or uint8/uint16,
@@ -413,17 +511,20 @@ def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig
             For guided upsampling it is ``s`` times larger than ``depth``.
         mask: optional validity mask shaped like ``depth`` (nonzero = measured), combined with the
             0/NaN rule.
-        config: a :class:`RestorerConfig`; ``**overrides`` change single fields.
+        model: the :class:`DepthRestorer` to run (e.g. ``DepthRestorer.from_pretrained("denoise")``); by default
+            one is built from ``config`` and ``**overrides`` (which change single fields).
+        config: a :class:`RestorerConfig`; only without ``model``.
         noise_sigma: the noise std in depth units; estimated from the input when omitted.
         scale_factor: guided upsampling factor; inferred from the sizes when omitted.
         return_details: return a :class:`RestorationResult` with the confidence and outlier maps.
         fill: ``"all"`` (default) fills every hole. ``"trusted"`` leaves as missing the holes whose fill is
             not confident (a hole at a depth gap whose side the colour does not make clear, or one too far
             from any measurement): 0 in integer output, NaN in float output. Their confidence is 0 either way.
+        timings: with ``return_details``, record the wall time of each stage in ``info["seconds"]``.
 
     Returns:
         The restored depth in the input's layout, type and units (uint16 in → uint16 out), or a
-        :class:`RestorationResult`.
+        :class:`RestorationResult` whose maps are float32 numpy for numpy input.
 
     Examples:
         >>> import numpy as np
@@ -432,8 +533,21 @@ def restore_depth(depth, rgb=None, mask=None, *, config: Optional[RestorerConfig
         >>> out.dtype, int(out.min()), int(out.max())
         (dtype('uint16'), 1000, 1000)
     """
-    return DepthRestorer(config, **overrides)(depth, rgb, mask=mask, noise_sigma=noise_sigma,
-                                               scale_factor=scale_factor, return_details=return_details, fill=fill)
+    if model is None:
+        model = DepthRestorer(config, **overrides)
+    elif config is not None or overrides:
+        raise DepthSRError(f"restore_depth got a model and {'config' if config is not None else sorted(overrides)}; "
+                           "pass either a model or the settings to build one (DepthRestorer(config, **overrides)).")
+    _check_fill(fill)
+    dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
+    y, observed, layout = parse_depth(depth, mask, dtype)
+    out = model._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=bool(timings) and return_details,
+                     integer_input=_is_integer_dtype(layout.dtype))
+    x = restore_layout(out.depth, layout)  # NaN (fill="trusted") becomes 0 in an integer dtype
+    if not return_details:
+        return x
+    return out._replace(depth=x, **{k: map_layout(getattr(out, k), layout)
+                                    for k in ("confidence", "trusted", "outliers")})
 
 
 _NOT_A_STATE_DICT = "not a torch_depth_sr state dict"

@@ -322,9 +322,12 @@ def _restore_one(model, job: Job, depth: np.ndarray, rgb: Optional[np.ndarray], 
         raise UsageError(f"-o '{job.target}': {suffix} cannot hold the input's {depth.dtype.name} depth without "
                          f"changing it; write it as {_formats_for(depth.dtype)} (the output "
                          "keeps the input's dtype and units; nothing was written)")
+    from .model import restore_depth
+
     rgb_t = None if rgb is None else torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1)[None].to(args.device)
     with torch.no_grad():
-        res = model(_to_model_input(depth), rgb_t, scale_factor=args.scale_factor, return_details=True)
+        res = restore_depth(_to_model_input(depth), rgb_t, model=model, scale_factor=args.scale_factor,
+                            return_details=True)
     restored = _as_numpy(res.depth).astype(depth.dtype, copy=False)
     written = []
     if job.confidence is not None:

@@ -525,8 +525,10 @@ class RestoreDepth(Transform):
             if not rgb.is_floating_point():
                 rgb = rgb.float() / 255.0
             rgb = rgb.to(self.device)
+        from .model import restore_depth  # the model imports nothing from here; lazily, as in __init__
+
         with torch.no_grad():
-            res = self.restorer(dep, rgb, return_details=self.with_confidence)
+            res = restore_depth(dep, rgb, model=self.restorer, return_details=self.with_confidence)
         out = res.depth if self.with_confidence else res
         if self.keep_input:
             d[self.keep_input] = d["depth"]

@@ -99,7 +99,7 @@ def _make_runner(method: str, device: str):
         model = (DepthRestorer() if method == "full" else DepthRestorer.preset("fast")).to(device)
 
         def run(y, rgb):
-            r = model(y, rgb, return_details=True)
+            r = model.restore_with_details(y, rgb, timings=True)
             return r.depth, r.info
 
         return run

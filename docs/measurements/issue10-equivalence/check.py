@@ -42,13 +42,34 @@ def _inputs(factor: int, degradation: str, holes: bool, dtype=torch.float32):
 
 
 def _details(model, depth, rgb, **kw):
-    r = model(depth, rgb, return_details=True, **kw)
+    if hasattr(model, "restore_with_details"):  # the tensor API (issue 10 item 1): forward returns the depth only
+        r = model.restore_with_details(depth, rgb, **kw)
+        plain = model(depth, rgb, **kw)  # forward gives the same depth as the details
+        assert torch.equal(torch.nan_to_num(plain, nan=-1.0), torch.nan_to_num(r.depth, nan=-1.0))
+    else:
+        r = model(depth, rgb, return_details=True, **kw)
     out = {"depth": r.depth, "confidence": r.confidence, "trusted": r.trusted, "outliers": r.outliers,
            "cg_iterations": torch.tensor(r.info["cg_iterations"]),
            "noise_sigma": torch.tensor(r.info["noise_sigma"], dtype=torch.float64)}
     if isinstance(r.depth, torch.Tensor) and r.depth.isnan().any():
         out["depth_nan"] = r.depth.isnan()
         out["depth"] = torch.nan_to_num(r.depth, nan=-1.0)
+    return out
+
+
+def _layout_details(depth, rgb, **kw):
+    """restore_depth on numpy / (H,W) / (1,H,W) / integer input: the layout handling outside the module."""
+    import numpy as np
+    from torch_depth_sr import restore_depth
+
+    r = restore_depth(depth, rgb, return_details=True, **kw)
+    as_t = lambda a: torch.from_numpy(np.asarray(a).astype(np.float64)) if not isinstance(a, torch.Tensor) else a  # noqa: E731
+    out = {"depth": as_t(r.depth), "confidence": as_t(r.confidence), "trusted": as_t(r.trusted),
+           "outliers": as_t(r.outliers), "cg_iterations": torch.tensor(r.info["cg_iterations"]),
+           "noise_sigma": torch.tensor(r.info["noise_sigma"], dtype=torch.float64)}
+    if out["depth"].isnan().any():
+        out["depth_nan"] = out["depth"].isnan()
+        out["depth"] = torch.nan_to_num(out["depth"], nan=-1.0)
     return out
 
 
@@ -88,6 +109,20 @@ def run(path: str) -> None:
                 results[key + "/paper"] = _details(DepthRestorer.ablation("paper", degradation=deg), y, rgb)
                 if factor == 4:
                     results[key + "/pretrained"] = _details(DepthRestorer.from_pretrained("upsample-x4"), y, rgb)
+    # the layouts, dtypes and array types that restore_depth converts (numpy, (H,W), (1,H,W), uint16, uint8 colour)
+    for holes in (False, True):
+        tag = "holes" if holes else "full"
+        y, rgb = _inputs(1, "area", holes)
+        d_np, rgb_np = y[0, 0].numpy(), (rgb[0].permute(1, 2, 0) * 255).round().to(torch.uint8).numpy()
+        u16 = (y[0, 0] * 10).round().numpy().astype("uint16")
+        small = {"num_layers": 3}
+        results[f"layout/{tag}/numpy_hw"] = _layout_details(d_np, rgb_np, **small)
+        results[f"layout/{tag}/numpy_hw_trusted"] = _layout_details(d_np, rgb_np, fill="trusted", **small)
+        results[f"layout/{tag}/uint16"] = _layout_details(u16, rgb_np, **small)
+        results[f"layout/{tag}/uint16_trusted"] = _layout_details(u16, rgb_np, fill="trusted", **small)
+        results[f"layout/{tag}/torch_chw"] = _layout_details(y[0], rgb[0], **small)
+        yl, rgbl = _inputs(2, "area", holes)
+        results[f"layout/{tag}/x2_numpy_hw"] = _layout_details(yl[1, 0].numpy(), rgbl[1].numpy(), **small)
     # one backward through a trainable model: gradients of every parameter that gets one
     for name, factor, deg in (("denoise", 1, "area"), ("x2-area", 2, "area"), ("x2-bicubic", 2, "bicubic")):
         y, rgb = _inputs(factor, deg, True)
