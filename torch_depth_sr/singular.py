@@ -64,27 +64,26 @@ def neighbour_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
         >>> int(s[0, 0, 2, 2]), int(s[0, 0, 0, 0]), int(s[0, 0, 1, 1])
         (0, 3, 7)
     """
+    obs, yv, tol_t = _measured(y, observed, tol)
+    count = torch.zeros_like(yv)
+    for dy, dx in _OFFSETS:
+        near = _shifted(obs, dy, dx, False) & ((_shifted(yv, dy, dx, 0.0) - yv).abs() <= tol_t)
+        count = count + near.to(yv.dtype)
+    return count * obs
+
+
+_OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0))
+
+
+def _measured(y: torch.Tensor, observed: torch.Tensor, tol) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Checked inputs of the neighbour tests: the measured mask, ``y`` with 0 elsewhere, ``tol`` as (B,1,1,1)."""
     check_4d(y, "y", channels=1)
     check_same_hw(y, observed, "y", "observed")
     b = y.shape[0]
     tol_t = torch.as_tensor(tol, dtype=y.dtype, device=y.device).reshape(-1)
     tol_t = tol_t.expand(b).view(b, 1, 1, 1) if tol_t.numel() == 1 else tol_t.view(b, 1, 1, 1)
     obs = (observed > 0) & torch.isfinite(y)
-    yv = torch.where(obs, y, torch.zeros_like(y))
-    h, w = y.shape[-2:]
-    yp = torch.nn.functional.pad(yv, (1, 1, 1, 1))
-    op = torch.nn.functional.pad(obs, (1, 1, 1, 1))
-    count = torch.zeros_like(yv)
-    for dy in (0, 1, 2):
-        for dx in (0, 1, 2):
-            if dy == 1 and dx == 1:
-                continue
-            near = op[..., dy:dy + h, dx:dx + w] & ((yp[..., dy:dy + h, dx:dx + w] - yv).abs() <= tol_t)
-            count = count + near.to(yv.dtype)
-    return count * obs
-
-
-_OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0))
+    return obs, torch.where(obs, y, torch.zeros_like(y)), tol_t
 
 
 def _shifted(t: torch.Tensor, dy: int, dx: int, fill) -> torch.Tensor:
@@ -104,8 +103,7 @@ def line_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torc
     impulse floats alone; neither is a chain whose value lies beyond its surroundings. Here a pixel is on a
     line when it agrees (within ``tol``) with a neighbour and one of the two has a second agreeing neighbour,
     its value lies two tolerances or more beyond the minimum or maximum of its measured disagreeing
-    neighbours, and on two
-    opposite sides it has a disagreeing neighbour (or the image's end, not on both).
+    neighbours, and on two opposite sides it has a disagreeing neighbour (or the image's end, not on both).
 
     Examples:
         >>> y = torch.full((1, 1, 7, 7), 50.0); y[0, 0, :, 3] = 10.0  # a one-pixel gap showing the background
@@ -114,13 +112,7 @@ def line_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torc
         >>> bool(s[0, 0, 0, 3]), bool(s[0, 0, 3, 3]), bool(s[0, 0, 1, 5])
         (True, True, False)
     """
-    check_4d(y, "y", channels=1)
-    check_same_hw(y, observed, "y", "observed")
-    b = y.shape[0]
-    tol_t = torch.as_tensor(tol, dtype=y.dtype, device=y.device).reshape(-1)
-    tol_t = tol_t.expand(b).view(b, 1, 1, 1) if tol_t.numel() == 1 else tol_t.view(b, 1, 1, 1)
-    obs = (observed > 0) & torch.isfinite(y)
-    yv = torch.where(obs, y, torch.zeros_like(y))
+    obs, yv, tol_t = _measured(y, observed, tol)
     agree, apart, count = {}, {}, torch.zeros_like(yv)
     lo = torch.full_like(yv, math.inf)
     hi = torch.full_like(yv, -math.inf)

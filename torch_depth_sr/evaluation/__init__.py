@@ -1,21 +1,6 @@
 """Evaluation: the degradations of the benchmark tracks (``shared/docs/benchmark.md``)."""
 
-from torch_depth_sr.degradations import (
-    PROTOCOLS,
-    PaperDegradation,
-    SensorDegradation,
-    edge_band,
-    make_degradation,
-    scene_rng,
-    stable_hash,
-)
+from torch_depth_sr import degradations as _degradations
+from torch_depth_sr.degradations import *  # noqa: F401,F403  (re-exported: the benchmark's degradations)
 
-__all__ = [
-    "PROTOCOLS",
-    "PaperDegradation",
-    "SensorDegradation",
-    "edge_band",
-    "make_degradation",
-    "scene_rng",
-    "stable_hash",
-]
+__all__ = list(_degradations.__all__)
