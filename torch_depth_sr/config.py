@@ -85,9 +85,16 @@ class RestorerConfig:
     # guided upsampling: the degradation K that made the low-resolution input: "area" (averaging, as in the noisy
     # Middlebury sets) or "bicubic" (antialiased bicubic resize, the protocol of the deep guided-SR networks)
     degradation: str = "area"
-    # the JBU x⁰ may leave bicubic interpolation by at most this many noise σ (0 = unbounded JBU)
+    # the JBU x⁰ may leave bicubic interpolation by at most this many noise σ plus upsample_init_edge_band times
+    # the local depth-edge evidence (upsampling.plane_residual); both 0 = unbounded JBU
     upsample_init_band: float = 3.0
-    upsample_jbu: dict = field(default_factory=lambda: {"radius": 2, "sigma_space": 1.0, "sigma_color": 0.1})
+    upsample_init_edge_band: float = 0.5
+    # ... except where the JBU x⁰, degraded by K, is further from the input than bicubic interpolation is by more
+    # than this many noise σ (a colour edge that moved a depth edge where the data do not put it); 0 = no check
+    upsample_init_consistency: float = 2.0
+    # first_order: each JBU tap extrapolated along its limited slope (no colour texture on slanted surfaces)
+    upsample_jbu: dict = field(default_factory=lambda: {"radius": 2, "sigma_space": 1.0, "sigma_color": 0.1,
+                                                        "first_order": True})
     upsample_tv_per_factor: bool = True
     # guided upsampling: multipliers on the layer parameters named here (λ, η, γ, μ₁, μ₂). The data term
     # weighs each fine pixel by 1/s² (KᵀK), so the half-quadratic splitting needs larger μ to hold Dx to its
@@ -412,6 +419,7 @@ class JBUConfig:
     radius: int = 2
     sigma_space: float = 1.0
     sigma_color: float = 0.1
+    first_order: bool = True
 
 
 @dataclass(frozen=True)
@@ -429,23 +437,30 @@ class LayerMultipliers:
 class UpsamplingConfig(_Group):
     """Guided upsampling: the degradation ``K`` (``"area"`` or ``"bicubic"``, built by
     :func:`~torch_depth_sr.operators.degradation_operator`), x⁰ on the fine grid (``init``: ``"jbu"`` held within
-    ``init_band`` noise σ of bicubic interpolation, or ``"bicubic"``) and the layer weights' policy
+    ``init_band`` noise σ plus ``init_edge_band`` times the depth-edge evidence of bicubic interpolation, or
+    ``"bicubic"``; :func:`~torch_depth_sr.upsampling.upsample_initial`) and the layer weights' policy
     (:meth:`layer_weights`). Flat fields ``degradation`` and ``upsample_*``."""
 
     degradation: str
     init: str
     init_band: float
+    init_edge_band: float
+    init_consistency: float
     jbu: JBUConfig
     tv_per_factor: bool
     multipliers: LayerMultipliers
     _FLAT: ClassVar[dict] = {"degradation": "degradation", "init": "upsample_init", "init_band": "upsample_init_band",
-                             "jbu": "upsample_jbu", "tv_per_factor": "upsample_tv_per_factor",
+                             "init_edge_band": "upsample_init_edge_band",
+                             "init_consistency": "upsample_init_consistency", "jbu": "upsample_jbu",
+                             "tv_per_factor": "upsample_tv_per_factor",
                              "multipliers": "upsample_scale"}
 
     @classmethod
     def from_config(cls, c: RestorerConfig) -> "UpsamplingConfig":
         return cls(degradation=c.degradation, init=c.upsample_init, init_band=c.upsample_init_band,
-                   jbu=JBUConfig(**c.upsample_jbu), tv_per_factor=c.upsample_tv_per_factor,
+                   init_edge_band=c.upsample_init_edge_band, init_consistency=c.upsample_init_consistency,
+                   jbu=JBUConfig(**c.upsample_jbu),
+                   tv_per_factor=c.upsample_tv_per_factor,
                    multipliers=LayerMultipliers(**c.upsample_scale))
 
     def to_flat(self) -> dict:
@@ -582,8 +597,11 @@ def _cg_fixed_iters(name: str, v: Any) -> None:
 
 
 def _upsample_jbu(name: str, v: Any) -> None:
-    allowed = "a dict with some of 'radius' (int >= 0), 'sigma_space' and 'sigma_color' (finite numbers > 0)"
-    if not isinstance(v, dict) or set(v) - {"radius", "sigma_space", "sigma_color"}:
+    allowed = ("a dict with some of 'radius' (int >= 0), 'sigma_space' and 'sigma_color' (finite numbers > 0) and "
+               "'first_order' (bool)")
+    if not isinstance(v, dict) or set(v) - {"radius", "sigma_space", "sigma_color", "first_order"}:
+        raise ParameterError(name, v, allowed)
+    if "first_order" in v and not isinstance(v["first_order"], bool):
         raise ParameterError(name, v, allowed)
     if "radius" in v and not (_is_int(v["radius"]) and v["radius"] >= 0):
         raise ParameterError(name, v, allowed)
@@ -630,6 +648,8 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "nl_value_range": _real(0.0, lo_open=False),
     "nl_value_range_clean": _real(0.0, lo_open=False),
     "upsample_init_band": _real(0.0, lo_open=False),
+    "upsample_init_edge_band": _real(0.0, lo_open=False),
+    "upsample_init_consistency": _real(0.0, lo_open=False),
     "upsample_jbu": _upsample_jbu,
     "upsample_tv_per_factor": _bool,
     "upsample_scale": _upsample_scale,

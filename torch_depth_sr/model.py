@@ -24,7 +24,7 @@ from torch import nn
 
 from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import (ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, InitConfig, RestorerConfig, UpsamplingConfig,
+from .config import (ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, InitConfig, RestorerConfig,
                      load_config_file)
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
@@ -33,6 +33,7 @@ from .layers import RestorationContext, RestorationState, UnrolledLayer, run_blo
 from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
 from .operators import Degradation, area_downsample, degradation_operator, grad
+from .upsampling import upsample_initial
 
 __all__ = [
     "RestorationResult",
@@ -273,7 +274,7 @@ class DepthRestorer(nn.Module):
             x0 = torch.where(q > 0, yn, guided)
             matches = None  # match again on x⁰ for the nonlocal term
         if not K.is_identity:  # x⁰ to the output grid
-            x0 = upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise)
+            x0 = upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise, degradation=K)
         elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
             ctx.prior = guided
         _, _, hh, ww = x0.shape
@@ -434,32 +435,6 @@ def _leave_unconfident_missing(x: torch.Tensor, ctx: RestorationContext, observe
     s = ctx.K.scale  # each observation pixel covers s×s output pixels
     missing = F.interpolate(missing.to(x.dtype), scale_factor=s, mode="nearest") > 0
     return x.masked_fill(missing, float("nan"))
-
-
-def upsample_initial(x0_lr, observed, guide, factor: int, c: UpsamplingConfig | RestorerConfig,
-                     noise: Optional[torch.Tensor] = None) -> torch.Tensor:
-    """x⁰ on the high-resolution grid (``factor`` times finer): joint bilateral upsampling (Kopf et al. 2007)
-    or bicubic, by the :class:`~torch_depth_sr.config.UpsamplingConfig` ``c`` (or a whole config's
-    ``upsampling`` group).
-
-    With ``c.init_band = b > 0`` and the noise level ``noise (B,)`` (in the units of ``x0_lr``), the joint
-    bilateral result may differ from bicubic interpolation by at most ``b·noise``: it removes noise, but on a
-    clean input its colour edges would move the depth edges (issue 12: ×4 on clean input it was worse than
-    bicubic interpolation).
-    """
-    if isinstance(c, RestorerConfig):
-        c = c.upsampling
-    bicubic = F.interpolate(x0_lr, scale_factor=factor, mode="bicubic", align_corners=False)
-    if c.init == "bicubic" or guide is None:
-        return bicubic
-    from .guided_filters import joint_bilateral_upsample
-
-    jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), radius=c.jbu.radius,
-                                   sigma_space=c.jbu.sigma_space, sigma_color=c.jbu.sigma_color)
-    if c.init_band <= 0 or noise is None:
-        return jbu
-    band = (c.init_band * noise).to(jbu).view(-1, 1, 1, 1)
-    return bicubic + torch.maximum(torch.minimum(jbu - bicubic, band), -band)
 
 
 def _is_integer_dtype(dtype) -> bool:
