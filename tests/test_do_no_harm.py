@@ -120,9 +120,11 @@ def test_clean_synthetic_upsampling_is_not_worse_than_bicubic():
 
 
 def test_clean_middlebury_upsampling_is_not_worse_than_bicubic():
-    """×4 on five 2006 images of the guided-SR test set (the fitting split). Before: 2.386 vs bicubic 1.865.
+    """×4 on five 2006 images of the guided-SR test set (the fitting split). Issue 12: 2.386 vs bicubic 1.865;
+    with the zeroth-order JBU x⁰ in a noise band 0.988 of bicubic's mean RMSE, worst image 1.158 (Cloth1); with the
+    first-order JBU, its edge band and consistency check 0.895, worst 1.099.
 
-    Not every image: on Cloth1's fine ripples the model stays 16 % behind bicubic (README), so the
+    Not every image: on Cloth1's fine ripples the model stays 10 % behind bicubic (README), so the
     test bounds the mean and the worst image.
     """
     from torch_depth_sr.evaluation.clean_upsampling import images, rmse_grey
@@ -135,8 +137,8 @@ def test_clean_middlebury_upsampling_is_not_worse_than_bicubic():
         guide = torch.from_numpy(rgb[:h, :w].copy()).permute(2, 0, 1)[None].float() / 255
         ours.append(rmse_grey(restore_depth(lr, guide), gt))
         theirs.append(rmse_grey(bicubic, gt))
-    assert np.mean(ours) <= 1.01 * np.mean(theirs), (ours, theirs)
-    assert max(o / t for o, t in zip(ours, theirs)) < 1.25, (ours, theirs)
+    assert np.mean(ours) <= 0.95 * np.mean(theirs), (ours, theirs)
+    assert max(o / t for o, t in zip(ours, theirs)) < 1.15, (ours, theirs)
 
 
 def test_a_one_pixel_gap_at_the_image_border_is_not_turned_into_a_phantom_surface():
