@@ -1,7 +1,7 @@
 """What every block-matching path shares: the result type, argument checks, offsets and weights."""
 from __future__ import annotations
 
-from typing import NamedTuple, Union
+from typing import NamedTuple, Optional, Union
 
 import numpy as np
 import torch
@@ -100,8 +100,10 @@ def _check_k(k, h, w, search_window, search_stride, include_self):
             f"include_self={include_self}, image {h}x{w}). Use k <= {n_min} or a larger search_window.")
 
 
-def prepare(depth, rgb, trust, block_size, search_window, k, color_weight, temperature, include_self,
-             search_stride):
+def prepare(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor], block_size: int,
+            search_window: int, k: int, color_weight: Scalar, temperature: Scalar, include_self: bool,
+            search_stride: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Check the arguments shared by every search; return ``(rho, temperature)`` as ``(B,)`` tensors."""
     _validate(depth, rgb, trust, block_size, search_window, k, search_stride)
     b, _, h, w = depth.shape
     _check_k(k, h, w, search_window, search_stride, include_self)
@@ -110,7 +112,7 @@ def prepare(depth, rgb, trust, block_size, search_window, k, color_weight, tempe
     return rho, temp
 
 
-def finish(dist, index, temp):
+def finish(dist: torch.Tensor, index: torch.Tensor, temp: torch.Tensor) -> BlockMatches:
     """Weights = softmax(−dist/h) over k (differentiable in a tensor temperature)."""
     t = temp.to(device=dist.device, dtype=dist.dtype).view(-1, 1, 1, 1)
     weight = torch.softmax(-dist / t, dim=1)

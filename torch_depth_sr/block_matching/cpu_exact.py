@@ -13,6 +13,8 @@ Bands of rows run in parallel (``numba.prange``; threads: ``numba.set_num_thread
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import torch
 from numba import njit, prange
@@ -249,7 +251,9 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
     _all_bands(xp, tp, cp, use_t, h, w, r, big_r, order, both, consts, samples, starts, ends, topd, topi, seeded)
 
 
-def block_match_cpu_exact(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride):
+def block_match_cpu_exact(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
+                          block_size: int, search_window: int, k: int, rho: torch.Tensor, include_self: bool,
+                          chunk_rows: Optional[int], stride: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Exact top-k block matches ``(dist, index)``, each (B, k, H, W), by the numba kernel."""
     bsz, _, h, w = depth.shape
     planes = padded_planes(depth, rgb, trust, block_size // 2, search_window // 2)

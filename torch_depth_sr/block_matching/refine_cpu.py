@@ -7,7 +7,10 @@ is computed directly over the block (same formula as the exact search) and kept 
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
+import torch
 from numba import njit, prange
 
 from ..native import kernel_threads
@@ -99,7 +102,9 @@ def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self
                     _offer(d, oid, td, ti, j)
 
 
-def refine_cpu(depth, rgb, trust, previous_index, block_size, search_window, k, rho, include_self, reach, lattice):
+def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
+               previous_index: torch.Tensor, block_size: int, search_window: int, k: int, rho: torch.Tensor,
+               include_self: bool, reach: int, lattice: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Top-k ``(dist, index)`` among the previous matches of each pixel and of its 4 neighbours at ``reach``,
     and (``lattice > 0``) the offsets of the search window on a lattice of that step."""
     bsz, _, h, w = depth.shape

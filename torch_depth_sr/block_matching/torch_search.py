@@ -7,6 +7,8 @@ on a GPU at any image size).
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -40,7 +42,9 @@ def _smallest_keys(keys: torch.Tensor, k: int, how: str = "split") -> torch.Tens
     raise DepthSRError(f"selection must be one of {_SELECT_CHOICES}; got {how!r}.")
 
 
-def block_match_torch(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride):
+def block_match_torch(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
+                      block_size: int, search_window: int, k: int, rho: torch.Tensor, include_self: bool,
+                      chunk_rows: Optional[int], stride: int) -> tuple[torch.Tensor, torch.Tensor]:
     """All offsets of a band of rows at once; the mirrored half read back from the other half.
 
     The distance is symmetric, ``d(i, i + o) = d(i + o, i)``, and so are the box sums that give it
