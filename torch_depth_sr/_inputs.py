@@ -51,7 +51,8 @@ def _as_tensor(x: Any, name: str) -> tuple[torch.Tensor, bool]:
     raise DTypeError(f"{name} must be a torch.Tensor or numpy.ndarray; got {type(x).__name__}.")
 
 
-def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch.float32):
+def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch.float32
+                ) -> tuple[torch.Tensor, torch.Tensor, DepthLayout]:
     """Return ``(y (B,1,H,W) float with 0 at missing, observed (B,1,H,W) float, layout)``.
 
     Raises:

@@ -35,7 +35,7 @@ Implementation choices where the protocol text leaves room (fixed here, document
 from __future__ import annotations
 
 import hashlib
-from typing import Dict, Optional
+from typing import Any, Dict, Optional
 
 import cv2
 import numpy as np
@@ -73,7 +73,8 @@ def _gt_numpy(sample: dict):
     return gt_t, gt, known
 
 
-def edge_band(gt: np.ndarray, known: Optional[np.ndarray] = None, threshold: float = 4.0, radius_disc=_DISC2) -> np.ndarray:
+def edge_band(gt: np.ndarray, known: Optional[np.ndarray] = None, threshold: float = 4.0,
+              radius_disc: np.ndarray = _DISC2) -> np.ndarray:
     """Boolean edge band: known pixels within 2 px of |∇ blur_σ=1(GT)| > ``threshold``."""
     g = cv2.GaussianBlur(gt.astype(np.float32), (9, 9), 1.0, borderType=cv2.BORDER_REFLECT_101)
     gy, gx = np.gradient(g.astype(np.float64))
@@ -189,7 +190,7 @@ class SensorDegradation:
     def __init__(self, sigma: float = 5.0, seed: int = 0, flying_fraction: float = 0.3,
                  impulse_fraction: float = 0.005, edge_hole_fraction: float = 0.3,
                  dropout_fraction: float = 0.03, blob_coverage: float = 0.04,
-                 blob_axes=(3.0, 12.0), edge_threshold: float = 4.0) -> None:
+                 blob_axes: tuple[float, float] = (3.0, 12.0), edge_threshold: float = 4.0) -> None:
         if not sigma >= 0:
             raise DepthSRError(f"sigma must be >= 0 (grey levels), got {sigma}")
         for k, v in dict(flying_fraction=flying_fraction, impulse_fraction=impulse_fraction,
@@ -246,7 +247,7 @@ class SensorDegradation:
 PROTOCOLS = {"paper": PaperDegradation, "sensor": SensorDegradation}
 
 
-def make_degradation(track: str, **kwargs):
+def make_degradation(track: str, **kwargs: Any) -> PaperDegradation | SensorDegradation:
     """``PaperDegradation(**kwargs)`` for ``'paper'``, ``SensorDegradation(**kwargs)`` for ``'sensor'``."""
     if track not in PROTOCOLS:
         raise DepthSRError(f"track={track!r} has no synthetic degradation; use one of {sorted(PROTOCOLS)}")

@@ -76,7 +76,7 @@ def describe_error(e: BaseException) -> str:
     return single_line(text)
 
 
-def single_line(text) -> str:
+def single_line(text: object) -> str:
     """``text`` with every run of whitespace, newlines included, folded to one space."""
     return " ".join(str(text).split())
 

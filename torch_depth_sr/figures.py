@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Optional, Sequence, Union
 
 import cv2
 import numpy as np
@@ -10,8 +10,10 @@ import torch
 
 __all__ = ["depth_to_bgr", "error_to_bgr", "rgb_to_bgr", "mosaic", "write_png", "comparison_figure"]
 
+ArrayLike = Union[torch.Tensor, np.ndarray]  # an image as a tensor or an array; leading size-1 axes are dropped
 
-def _np2d(x) -> np.ndarray:
+
+def _np2d(x: ArrayLike) -> np.ndarray:
     if isinstance(x, torch.Tensor):
         x = x.detach().float().cpu().numpy()
     x = np.asarray(x, dtype=np.float32)
@@ -20,7 +22,7 @@ def _np2d(x) -> np.ndarray:
     return x
 
 
-def depth_to_bgr(depth, vmin: float, vmax: float, missing=None) -> np.ndarray:
+def depth_to_bgr(depth: ArrayLike, vmin: float, vmax: float, missing: Optional[ArrayLike] = None) -> np.ndarray:
     """Colour-map depth with a fixed range (turbo); missing pixels (0/NaN or ``missing``) are black."""
     d = _np2d(depth)
     bad = ~np.isfinite(d) | (d <= 0)
@@ -32,7 +34,7 @@ def depth_to_bgr(depth, vmin: float, vmax: float, missing=None) -> np.ndarray:
     return img
 
 
-def error_to_bgr(pred, gt, valid, vmax: float) -> np.ndarray:
+def error_to_bgr(pred: ArrayLike, gt: ArrayLike, valid: ArrayLike, vmax: float) -> np.ndarray:
     """Absolute error |pred − gt| on a fixed scale [0, vmax] (hot), unknown GT grey."""
     e = np.abs(_np2d(pred) - _np2d(gt))
     u8 = np.clip(e / max(vmax, 1e-12) * 255, 0, 255).astype(np.uint8)
@@ -41,7 +43,7 @@ def error_to_bgr(pred, gt, valid, vmax: float) -> np.ndarray:
     return img
 
 
-def rgb_to_bgr(rgb) -> np.ndarray:
+def rgb_to_bgr(rgb: ArrayLike) -> np.ndarray:
     """(3,H,W) or (1,3,H,W) float in [0,1] -> H×W×3 uint8 BGR."""
     if isinstance(rgb, torch.Tensor):
         rgb = rgb.detach().float().cpu().numpy()
@@ -73,7 +75,7 @@ def mosaic(rows: Sequence[Sequence[np.ndarray]], labels: Sequence[Sequence[str]]
     return np.vstack(out_rows)
 
 
-def write_png(path, img: np.ndarray) -> Path:
+def write_png(path: Path | str, img: np.ndarray) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), img):
@@ -81,8 +83,8 @@ def write_png(path, img: np.ndarray) -> Path:
     return path
 
 
-def comparison_figure(path, rgb, degraded, gt, valid, results: dict, err_max: float | None = None,
-                      ref_name: str = "gt") -> Path:
+def comparison_figure(path: Path | str, rgb: ArrayLike, degraded: ArrayLike, gt: ArrayLike, valid: ArrayLike,
+                      results: dict, err_max: float | None = None, ref_name: str = "gt") -> Path:
     """Paper Figure 4-1 layout: colour, input, GT, each method; error maps in the second row."""
     g = _np2d(gt)
     v = _np2d(valid) > 0

@@ -13,11 +13,14 @@ a sample whose mask is empty gives ``nan``.
 from __future__ import annotations
 
 import math
-from typing import Dict, Optional, Union
+from typing import Dict, Optional, Sequence, Union
 
+import numpy as np
 import torch
 
 from torch_depth_sr.errors import DepthSRError, ShapeError
+
+ArrayLike = Union[torch.Tensor, np.ndarray]  # anything torch.as_tensor takes as a depth map or mask
 
 
 def _prepare(pred, gt, mask):
@@ -51,19 +54,20 @@ def _reduce(values, m, unbatched):
     return out[0] if unbatched else out
 
 
-def rmse(pred, gt, mask=None) -> torch.Tensor:
+def rmse(pred: ArrayLike, gt: ArrayLike, mask: Optional[ArrayLike] = None) -> torch.Tensor:
     """Root-mean-square error over ``mask`` per sample."""
     err, m, ub = _prepare(pred, gt, mask)
     return _reduce(err * err, m, ub).sqrt()
 
 
-def mae(pred, gt, mask=None) -> torch.Tensor:
+def mae(pred: ArrayLike, gt: ArrayLike, mask: Optional[ArrayLike] = None) -> torch.Tensor:
     """Mean absolute error over ``mask`` per sample."""
     err, m, ub = _prepare(pred, gt, mask)
     return _reduce(err.abs(), m, ub)
 
 
-def bad_pixel_rate(pred, gt, mask=None, threshold: Union[float, torch.Tensor] = 1.0) -> torch.Tensor:
+def bad_pixel_rate(pred: ArrayLike, gt: ArrayLike, mask: Optional[ArrayLike] = None,
+                   threshold: Union[float, torch.Tensor] = 1.0) -> torch.Tensor:
     """Share of masked pixels with ``|pred − gt| > threshold`` (float or per-sample ``(B,)``)."""
     err, m, ub = _prepare(pred, gt, mask)
     thr = torch.as_tensor(threshold, dtype=torch.float64, device=err.device)
@@ -74,7 +78,7 @@ def bad_pixel_rate(pred, gt, mask=None, threshold: Union[float, torch.Tensor] = 
     return _reduce((err.abs() > thr).to(torch.float64), m, ub)
 
 
-def geometric_mean(values) -> float:
+def geometric_mean(values: Union[Sequence[float], ArrayLike]) -> float:
     """Geometric mean (the ``upsample-a`` summary of the 12 per-image RMSEs)."""
     v = torch.as_tensor(values, dtype=torch.float64).flatten()
     if v.numel() == 0 or bool((v <= 0).any()):
@@ -82,7 +86,7 @@ def geometric_mean(values) -> float:
     return float(torch.exp(torch.log(v).mean()))
 
 
-def evaluate(pred, sample: dict, outlier_threshold: float = 3.0) -> Dict[str, float]:
+def evaluate(pred: ArrayLike, sample: dict, outlier_threshold: float = 3.0) -> Dict[str, float]:
     """All metrics of one restored sample, in grey levels of the stored ground truth.
 
     Args:

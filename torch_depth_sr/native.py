@@ -15,9 +15,10 @@ from __future__ import annotations
 import importlib
 import os
 import warnings
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 import numpy as np
+from numpy.typing import DTypeLike
 import torch
 
 from .errors import DepthSRError
@@ -82,6 +83,6 @@ def kernel_threads() -> int:
     return n
 
 
-def as_numpy(t: torch.Tensor, shape, dtype) -> np.ndarray:
+def as_numpy(t: torch.Tensor, shape: Sequence[int], dtype: DTypeLike) -> np.ndarray:
     """A C-contiguous numpy array of a CPU tensor, reshaped and cast (no copy when nothing needs to change)."""
     return np.ascontiguousarray(t.detach().reshape(shape).numpy(), dtype=dtype)

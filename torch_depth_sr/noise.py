@@ -124,8 +124,9 @@ def _grid_step(vals: torch.Tensor, default: float) -> float:
     return default
 
 
-def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma=None, relative_floor: float = 1e-3,
-                step: torch.Tensor | None = None):
+def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma: float | torch.Tensor | None = None,
+                relative_floor: float = 1e-3, step: torch.Tensor | None = None
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Return ``(offset (B,), scale (B,), sigma (B,))`` of the scale policy.
 
     ``scale = max(sigma, relative_floor · (p99 − p1 of measured depth), 1e-6 · |offset|)``:

@@ -12,6 +12,8 @@ Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 import torch
 from numba import njit, prange
@@ -126,8 +128,9 @@ def _terms_parallel(x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
         _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, ridge, range_sigma, alpha, stats)
 
 
-def nonlocal_terms_cpu(x: torch.Tensor, grad_x, index: torch.Tensor, weight: torch.Tensor, ridge: float = 0.0,
-                       range_sigma=None):
+def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: torch.Tensor, weight: torch.Tensor,
+                       ridge: float = 0.0, range_sigma: Optional[torch.Tensor] = None
+                       ) -> tuple[Optional[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(α or None, x̄, variance, squared centroid offset)`` of CPU float tensors, without gradient.
 
     Args:

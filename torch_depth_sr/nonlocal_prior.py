@@ -12,7 +12,7 @@ the torch path, a numba kernel on the CPU when no gradient is needed).
 """
 from __future__ import annotations
 
-from typing import Optional, Tuple
+from typing import Optional, Tuple, Union
 
 import torch
 
@@ -125,7 +125,8 @@ def _kernel():
 
 def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: BlockMatches, *,
                    value_weight: float = 0.0, max_var: float = 0.25, max_offset: float = 2.5,
-                   plane_ridge: float = 0.0, range_sigma=None, backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
+                   plane_ridge: float = 0.0, range_sigma: Union[float, torch.Tensor, None] = None,
+                   backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
     """α, and the value prior ``(W, x̄)``, from one read of the matches.
 
     Args:

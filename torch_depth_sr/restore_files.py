@@ -8,6 +8,7 @@ others are still written.
 """
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 from dataclasses import dataclass
@@ -71,7 +72,7 @@ def _keep(item: dict) -> dict:
 
 # ---- planning: every check that needs no file content ---------------------------------------------------------
 
-def plan_restore(args) -> list[Job]:
+def plan_restore(args: argparse.Namespace) -> list[Job]:
     """The jobs of a ``restore`` command line, or :class:`UsageError` before anything is read or written."""
     depth_in = Path(args.depth)
     rgb_in = Path(args.rgb) if args.rgb else None
@@ -232,7 +233,7 @@ def _check_writable(out: Path) -> None:
 
 # ---- running -----------------------------------------------------------------------------------------------------
 
-def restore_paths(args) -> int:
+def restore_paths(args: argparse.Namespace) -> int:
     """Run ``restore``: 0 when every output was written or skipped.
 
     Raises:

@@ -125,7 +125,8 @@ def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, parallel, q, p):
 
 
 def singular_rounds_cpu(y0: torch.Tensor, obs: torch.Tensor, x: torch.Tensor, index: torch.Tensor,
-                        weight: torch.Tensor, floor: torch.Tensor, tau: float, rounds: int):
+                        weight: torch.Tensor, floor: torch.Tensor, tau: float, rounds: int
+                        ) -> tuple[torch.Tensor, torch.Tensor]:
     """``(Q, P)`` of the singular test, each ``(B, 1, H, W)`` in ``y0``'s dtype, by the numba kernel.
 
     Args:

@@ -37,7 +37,7 @@ Examples:
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Any, Callable, Optional, Sequence, Tuple, TypeVar, Union
 
 import numpy as np
 import torch
@@ -46,8 +46,14 @@ import torch.nn.functional as F
 from ._inputs import native_array
 from .errors import DepthSRError, DTypeError
 
+if TYPE_CHECKING:
+    from .config import RestorerConfig
+    from .model import DepthRestorer
+
 TUPLE_KEYS = ("depth", "rgb", "gt", "mask")
 Range = Union[float, Tuple[float, float]]
+# A sample: a dict, a (depth, rgb, gt, mask) tuple/list or a bare depth; a transform returns the same type.
+SampleT = TypeVar("SampleT", bound=Union[dict, tuple, list, torch.Tensor, np.ndarray])
 
 __all__ = [
     "AddFlyingPixels",
@@ -159,7 +165,7 @@ class Transform:
     def _apply(self, d: dict, params: dict) -> dict:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def __call__(self, sample):
+    def __call__(self, sample: SampleT) -> SampleT:
         d, pack = _unpack(sample)
         params = self._params(d, self._generator(d))
         return pack(self._apply(d, params))
@@ -179,7 +185,7 @@ class Compose(Transform):
     def __init__(self, transforms: Sequence[Callable]) -> None:
         self.transforms = list(transforms)
 
-    def __call__(self, sample):
+    def __call__(self, sample: SampleT) -> SampleT:
         for t in self.transforms:
             sample = t(sample)
         return sample
@@ -284,7 +290,7 @@ class AddHoles(_DepthTransform):
         seed: see the module docstring.
     """
 
-    def __init__(self, dropout: Range = 0.03, blob_coverage: Range = 0.04, blob_axes=(3.0, 12.0),
+    def __init__(self, dropout: Range = 0.03, blob_coverage: Range = 0.04, blob_axes: Tuple[float, float] = (3.0, 12.0),
                  edge_fraction: Range = 0.3, edge_threshold: float = 4.0, edge_radius: int = 2,
                  seed: Optional[int] = None) -> None:
         self.dropout = _fraction(dropout, "dropout")
@@ -493,8 +499,9 @@ class RestoreDepth(Transform):
         **overrides: fields of :class:`~torch_depth_sr.RestorerConfig` (e.g. ``num_layers=4``).
     """
 
-    def __init__(self, restorer=None, pretrained: Optional[str] = None, device: Union[str, torch.device] = "cpu",
-                 keep_input: Optional[str] = None, with_confidence: bool = False, config=None, **overrides) -> None:
+    def __init__(self, restorer: Optional[DepthRestorer] = None, pretrained: Optional[str] = None,
+                 device: Union[str, torch.device] = "cpu", keep_input: Optional[str] = None,
+                 with_confidence: bool = False, config: Optional[RestorerConfig] = None, **overrides: Any) -> None:
         from .model import DepthRestorer
 
         if restorer is None:
