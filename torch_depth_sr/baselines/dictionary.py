@@ -169,7 +169,8 @@ def batched_omp(
     return OMPResult(coef, n_active, res2)
 
 
-def overcomplete_dct_dictionary(patch_size: int, n_atoms: int, dtype=torch.float32, device=None) -> torch.Tensor:
+def overcomplete_dct_dictionary(patch_size: int, n_atoms: int, dtype: torch.dtype = torch.float32,
+                                device: torch.device | str | None = None) -> torch.Tensor:
     r"""Overcomplete separable DCT dictionary without the DC atom (the K-SVD initialisation).
 
     Atoms are :math:`\cos(\pi u (i + 1/2)/n_y) \cos(\pi v (j + 1/2)/n_x)` sampled on a

@@ -31,6 +31,7 @@ from typing import Tuple, Union
 
 import cv2
 import numpy as np
+from numpy.typing import DTypeLike
 
 from torch_depth_sr.errors import DepthSRError, DTypeError
 
@@ -161,7 +162,7 @@ def _png_bytes(a: np.ndarray, path: PathLike = "") -> bytes:
     return buf.tobytes()
 
 
-def read_pfm(path: PathLike, return_scale: bool = False):
+def read_pfm(path: PathLike, return_scale: bool = False) -> Union[np.ndarray, Tuple[np.ndarray, float]]:
     """Read a PFM file as float32 ``(H, W)`` (``Pf``) or ``(H, W, 3)`` (``PF``), top row first.
 
     PFM stores rows bottom-up; they are flipped here. The header's scale sign gives the byte order
@@ -319,7 +320,7 @@ def read_depth_stored(path: PathLike) -> np.ndarray:
     raise DataFileError(f"unknown depth file type '{ext}' for '{path}'; expected {', '.join(DEPTH_SUFFIXES)}")
 
 
-def depth_suffixes_for(dtype) -> list:
+def depth_suffixes_for(dtype: DTypeLike) -> list[str]:
     """The suffixes :func:`write_depth` can write ``dtype`` to without changing it, e.g. ``['.npy', '.pfm', ...]``."""
     return [s for s in DEPTH_SUFFIXES if _holds(s, np.dtype(dtype))]
 

@@ -233,7 +233,7 @@ class MiddleburyStereo(Dataset):
         return load_middlebury_scene(d, y)
 
     @property
-    def names(self):
+    def names(self) -> list[str]:
         return [d.name for _, d in self.items]
 
 

@@ -12,6 +12,8 @@ Units: 8-bit-disparity-like grey levels, values within about [20, 230], ``scale 
 
 from __future__ import annotations
 
+from typing import Callable, Optional
+
 import numpy as np
 import torch
 from torch.utils.data import Dataset
@@ -161,7 +163,8 @@ class SyntheticScenes(Dataset):
     Optionally applies ``transform`` (e.g. a degradation from :mod:`torch_depth_sr.evaluation`).
     """
 
-    def __init__(self, n: int = 100, size=(128, 128), seed: int = 0, transform=None) -> None:
+    def __init__(self, n: int = 100, size: int | tuple[int, int] = (128, 128), seed: int = 0,
+                 transform: Optional[Callable[[dict], dict]] = None) -> None:
         if n < 0:
             raise DepthSRError(f"n must be >= 0, got {n}")
         if isinstance(size, int):
