@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Iterator, Optional, Sequence
 
 import numpy as np
 import torch
@@ -32,14 +33,14 @@ from .gdsr import add_noise, bicubic as _bicubic, crop_to_multiple, degrade as _
 __all__ = ["FITTING", "images", "degrade", "rmse_grey", "main"]
 
 
-def images(root: Path, dataset: str, only: list[str] | None = None):
+def images(root: Path, dataset: str, only: list[str] | None = None) -> Iterator[tuple[str, np.ndarray, np.ndarray]]:
     """Yield ``(name, depth float32 (H,W), rgb uint8 (H,W,3))`` of one grey-level set, sorted by name
     (:func:`torch_depth_sr.datasets.gdsr.gdsr_images`)."""
     for img in gdsr_images(root, dataset, only):
         yield img.name, img.depth, img.rgb
 
 
-def degrade(gt: torch.Tensor, s: int, noise: float, seed: int = 0):
+def degrade(gt: torch.Tensor, s: int, noise: float, seed: int = 0) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Crop ``gt (1,1,H,W)`` to a multiple of ``s``; return it, the low-resolution input and bicubic back up
     (the ``gdsr`` protocol's resampling; noise drawn from a generator named by ``seed``)."""
     gt = crop_to_multiple(gt, s)
@@ -52,7 +53,7 @@ def rmse_grey(p: torch.Tensor, gt: torch.Tensor) -> float:
     return rmse(p, gt, "Middlebury")
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sets", nargs="*", default=["Middlebury", "Lu"])
     ap.add_argument("--scale", type=int, default=4)

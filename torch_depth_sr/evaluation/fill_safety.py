@@ -32,6 +32,7 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import Optional, Sequence
 
 import numpy as np
 import torch
@@ -91,7 +92,7 @@ def _model(config: dict, fill: str):
     return lambda y, rgb: model(y, rgb, fill=fill)
 
 
-def run_sensor(scenes, config: dict, fill: str, root=None) -> list[dict]:
+def run_sensor(scenes: Optional[Sequence[str]], config: dict, fill: str, root: Path | str | None = None) -> list[dict]:
     from .._data_root import data_root
     from ..metrics import evaluate
     from .bench import _samples
@@ -147,7 +148,7 @@ def outlier_shares(depth_in: np.ndarray, depth_out: np.ndarray, nb: int = 20, st
             "outliers_measured": float(out[~is_filled].mean())}
 
 
-def run_real(config: dict, fill: str, root=None) -> list[dict]:
+def run_real(config: dict, fill: str, root: Path | str | None = None) -> list[dict]:
     from .._data_root import data_root
     from ..datasets.real_sensor import DATASET, FRAMES, load_real_frame
 
@@ -181,7 +182,7 @@ def _mean(rows, key, pick):
     return float(np.mean(vals)) if vals else math.nan
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", nargs="*", default=None, help="sensor scenes (default: all 21)")
     ap.add_argument("--config", default=None, help="RestorerConfig overrides as JSON")

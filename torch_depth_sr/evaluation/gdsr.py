@@ -29,12 +29,13 @@ nine that are not 2006 fitting scenes (``subset: "heldout"``).
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
 import time
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional, TypeVar
 
 import numpy as np
 import torch
@@ -43,6 +44,9 @@ from tqdm import tqdm
 
 from ..datasets.gdsr import FOLDER, SETS, GDSRImage, gdsr_images, resolve_set
 from ..errors import UsageError
+
+if TYPE_CHECKING:
+    from ..model import DepthRestorer
 
 __all__ = ["METHODS", "REAL_SCALE", "crop_to_multiple", "resize_pillow", "add_noise", "degrade", "bicubic",
            "rmse", "make_model", "run_gdsr", "summarise_gdsr"]
@@ -54,8 +58,10 @@ GREY_SETS = ("Middlebury", "Lu")
 CM_SETS = ("NYUDepthv2_Test", "RGBDD", "RGBDD_Test_Realscene")
 NYU_BORDER = 6
 
+ArrayT = TypeVar("ArrayT", torch.Tensor, np.ndarray)
 
-def crop_to_multiple(a, s: int):
+
+def crop_to_multiple(a: ArrayT, s: int) -> ArrayT:
     """Crop the last two axes (bottom and right) so both are divisible by ``s``."""
     h, w = a.shape[-2] // s * s, a.shape[-1] // s * s
     return a[..., :h, :w]
@@ -122,7 +128,7 @@ def rmse(pred: torch.Tensor, gt: torch.Tensor, dataset: str) -> float:
     return float((p - g).square().mean().sqrt())
 
 
-def make_model(method: str, scale: int, config: Optional[dict] = None, device: str = "cpu"):
+def make_model(method: str, scale: int, config: Optional[dict] = None, device: str = "cpu") -> Optional[DepthRestorer]:
     """The model behind a method name, or None where no such model exists (``trained`` for a scale without a
     shipped ``upsample-x{scale}``)."""
     from ..errors import DepthSRError
@@ -163,7 +169,7 @@ def _check(args) -> tuple[list[str], list[int], list[float], list[str]]:
     return list(dict.fromkeys(sets)), list(dict.fromkeys(scales)), list(dict.fromkeys(noises)), methods
 
 
-def run_gdsr(args, config: Optional[dict] = None) -> int:
+def run_gdsr(args: argparse.Namespace, config: Optional[dict] = None) -> int:
     """``bench --track gdsr``: see the module docstring. ``config``: RestorerConfig overrides for ``full``
     (``bench`` passes its checked ``--config``)."""
     from .._data_root import data_root

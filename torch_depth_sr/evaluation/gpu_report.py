@@ -22,6 +22,7 @@ import json
 import statistics
 import time
 from pathlib import Path
+from typing import Optional, Sequence
 
 import torch
 
@@ -65,7 +66,7 @@ def agreement(device: str, height: int, width: int, batch: int) -> dict:
             "out_rmse_cpu": rmse(out_cpu), "out_rmse_gpu": rmse(out_gpu), "input_rmse": rmse(y)}
 
 
-def matching_times(device: str, sizes, batches, repeats: int) -> list:
+def matching_times(device: str, sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeats: int) -> list[dict]:
     """One block-matching pass (21×21 window, the model's block and k) per size and batch."""
     c = DepthRestorer().config
     rows = []
@@ -79,7 +80,7 @@ def matching_times(device: str, sizes, batches, repeats: int) -> list:
     return rows
 
 
-def selection_times(device: str, sizes, batches, repeats: int) -> list:
+def selection_times(device: str, sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeats: int) -> list[dict]:
     """Each way of taking the k smallest of the block-matching keys, on keys shaped like the model's."""
     c = DepthRestorer().config
     n = c.search_window ** 2
@@ -124,7 +125,7 @@ def profile(device: str, height: int, width: int, path: Path) -> dict:
     return {"kernel_launches": launches, "ops": sum(e.count for e in avg)}
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     from .report import metadata as _metadata, print_table as _print_table
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])

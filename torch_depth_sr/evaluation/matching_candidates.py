@@ -15,6 +15,7 @@ import argparse
 import statistics
 import time
 from contextlib import contextmanager
+from typing import Optional, Sequence
 
 import torch
 
@@ -70,7 +71,7 @@ def _run(spec: dict, call: dict, kw: dict) -> BlockMatches:
     return refine_matches(x, prev, rgb, trust, **kw, reach=spec["reach"], lattice=spec["lattice"])
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--size", type=int, nargs=2, default=(480, 640), metavar=("H", "W"))
     p.add_argument("--repeats", type=int, default=3)

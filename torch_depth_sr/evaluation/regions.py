@@ -41,6 +41,7 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import Optional, Sequence
 
 import cv2
 import numpy as np
@@ -80,7 +81,8 @@ def _discontinuities(gt: np.ndarray) -> np.ndarray:
     return out
 
 
-def local_quadratic(gt: np.ndarray, known: np.ndarray, sigma: float = FIT_SIGMA):
+def local_quadratic(gt: np.ndarray, known: np.ndarray, sigma: float = FIT_SIGMA
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per pixel ``(gx, gy, hxx, hyy, hxy)`` of a Gaussian-weighted quadratic fit on its own surface.
 
     Surfaces: 4-connected components of ``known`` minus the discontinuity pixels. Pixels outside any
@@ -124,7 +126,7 @@ def local_quadratic(gt: np.ndarray, known: np.ndarray, sigma: float = FIT_SIGMA)
     return tuple(out)
 
 
-def label_regions(gt, known=None) -> np.ndarray:
+def label_regions(gt: torch.Tensor | np.ndarray, known: torch.Tensor | np.ndarray | None = None) -> np.ndarray:
     """Region codes ``(H,W) uint8``: 0 GT unknown, then 1..5 = :data:`REGIONS` (see the module docstring).
 
     Args:
@@ -161,7 +163,7 @@ def label_regions(gt, known=None) -> np.ndarray:
     return labels
 
 
-def region_errors(pred, gt, labels: np.ndarray) -> dict:
+def region_errors(pred: torch.Tensor | np.ndarray, gt: torch.Tensor | np.ndarray, labels: np.ndarray) -> dict:
     """``{region: {"n", "sse", "sae"}}`` of ``pred − gt`` over each region (float64 sums)."""
     p = np.asarray(pred.detach().cpu().numpy() if isinstance(pred, torch.Tensor) else pred, np.float64).squeeze()
     g = np.asarray(gt.detach().cpu().numpy() if isinstance(gt, torch.Tensor) else gt, np.float64).squeeze()
@@ -217,7 +219,8 @@ def summarise_regions(rows: list[dict], reference: str = "rgf") -> list[dict]:
     return out
 
 
-def label_figure(path, rgb, gt, labels: np.ndarray) -> Path:
+def label_figure(path: Path | str, rgb: torch.Tensor | np.ndarray, gt: torch.Tensor | np.ndarray,
+                 labels: np.ndarray) -> Path:
     """PNG: colour, ground truth and the region labels (unknown black, planar grey, slanted green, curved
     blue, edge red, thin yellow)."""
     from ..figures import depth_to_bgr, mosaic, rgb_to_bgr, write_png
@@ -260,7 +263,7 @@ def _table(summary: list[dict], track: str, subset: str, methods: list[str], ref
     return "\n".join(t1 + t2)
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     from .._data_root import data_root
     from .bench import _parse_config, _samples
     from .methods import run_method

@@ -29,6 +29,7 @@ took longer than this is not repeated; its warm-up time is reported with ``repea
 """
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import statistics
@@ -67,7 +68,8 @@ STAGES = ("block_matching", "singular", "nonlocal", "cg")
 # ----------------------------------------------------------------------------------------------
 
 
-def make_inputs(height: int, width: int, batch: int, seed: int = 0, sigma: float = 5.0, hole_fraction: float = 0.05):
+def make_inputs(height: int, width: int, batch: int, seed: int = 0, sigma: float = 5.0, hole_fraction: float = 0.05
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(depth (B,1,H,W) with 0 = hole, rgb (B,3,H,W), gt (B,1,H,W))`` from synthetic scenes."""
     from ..datasets.synthetic import make_scene
 
@@ -153,7 +155,7 @@ def _stage_runner(method: str):
     return run
 
 
-def measure_dataloader(workers: int = 2, frames: int = 16, size=(240, 320)) -> dict:
+def measure_dataloader(workers: int = 2, frames: int = 16, size: tuple[int, int] = (240, 320)) -> dict:
     """Frames per second of ``examples/restore_in_dataloader.py`` (start-up included), or an error row."""
     script = Path(__file__).resolve().parents[2] / "examples" / "restore_in_dataloader.py"
     row = {"method": "dataloader", "height": size[0], "width": size[1], "batch": 1, "workers": workers,
@@ -282,7 +284,7 @@ def _parse_ints(s: str):
     return tuple(int(t) for t in s.split(",") if t.strip())
 
 
-def run_speed(args) -> int:
+def run_speed(args: argparse.Namespace) -> int:
     """Run the speed track; print a table; write ``{"metadata", "results"}`` JSON to ``args.json``."""
     from .report import metadata as _metadata, print_table as _print_table
 

@@ -15,6 +15,7 @@ import argparse
 import json
 import statistics
 import time
+from typing import Optional, Sequence
 
 import numpy as np
 import torch
@@ -40,7 +41,7 @@ def _model(overrides: dict) -> DepthRestorer:
     return DepthRestorer(RestorerConfig.from_dict(overrides))
 
 
-def accuracy(overrides: dict, samples) -> dict:
+def accuracy(overrides: dict, samples: Sequence[dict]) -> dict:
     """Mean RMSE over GT-known pixels, per track."""
     return {t: float(np.mean(v)) for t, v in errors_by(_model(overrides), samples, "track").items()}
 
@@ -61,7 +62,7 @@ def timing(overrides: dict, height: int = 480, width: int = 640, repeats: int = 
     return statistics.median(times)
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--configs", nargs="*", default=None, help="JSON dicts of RestorerConfig overrides")
     p.add_argument("--part", choices=["accuracy", "timing", "both"], default="both")

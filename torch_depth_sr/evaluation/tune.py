@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from typing import Optional
+from typing import Callable, Iterable, Optional, Sequence
 
 import torch
 
@@ -23,7 +23,8 @@ __all__ = ["SEARCH", "fitting_samples", "errors_by", "score", "coordinate_search
 SEARCH = ("singular_sigma_floor", "guided_prior", "lam", "eta", "mu2", "mu1", "gamma", "color_weight", "temperature")
 
 
-def fitting_samples(crop: Optional[int], n_synthetic: int = 4, tracks=("paper", "sensor")):
+def fitting_samples(crop: Optional[int], n_synthetic: int = 4, tracks: Sequence[str] = ("paper", "sensor")
+                    ) -> list[dict]:
     """Degraded 2006 scenes (+ ``n_synthetic`` synthetic ones), one dict per (track, scene); centre
     ``crop``×``crop`` crops, or the full images when ``crop`` is None."""
     from .._data_root import data_root
@@ -53,7 +54,7 @@ def fitting_samples(crop: Optional[int], n_synthetic: int = 4, tracks=("paper", 
     return out
 
 
-def errors_by(model: DepthRestorer, samples, key: str, metric: str = "rmse") -> dict:
+def errors_by(model: DepthRestorer, samples: Iterable[dict], key: str, metric: str = "rmse") -> dict:
     """``{sample[key]: [error per sample]}``: RMSE or MAE over ``mask`` of ``model`` on each sample
     (guided upsampling where a sample has a ``factor``)."""
     out: dict = {}
@@ -66,14 +67,15 @@ def errors_by(model: DepthRestorer, samples, key: str, metric: str = "rmse") -> 
     return out
 
 
-def score(config: RestorerConfig, samples) -> float:
+def score(config: RestorerConfig, samples: Iterable[dict]) -> float:
     """Mean RMSE over all samples."""
     errs = [e for v in errors_by(DepthRestorer(config), samples, "track").values() for e in v]
     return sum(errs) / len(errs)
 
 
-def coordinate_search(config: RestorerConfig, samples, rounds: int = 2, names=SEARCH, log=print,
-                      factors_first=(0.25, 0.5, 2.0, 4.0)):
+def coordinate_search(config: RestorerConfig, samples: Sequence[dict], rounds: int = 2, names: Sequence[str] = SEARCH,
+                      log: Callable[[str], object] = print, factors_first: Sequence[float] = (0.25, 0.5, 2.0, 4.0)
+                      ) -> tuple[RestorerConfig, float]:
     best = score(config, samples)
     log(f"start {best:.4f}")
     for rnd in range(rounds):
@@ -91,7 +93,7 @@ def coordinate_search(config: RestorerConfig, samples, rounds: int = 2, names=SE
     return config, best
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--crop", type=int, default=160)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+from typing import Optional, Sequence
 
 import torch
 from tqdm import tqdm
@@ -42,7 +43,7 @@ def _errors(samples, params: dict) -> tuple[float, float]:
     return sum(rmse) / len(rmse), sum(mae) / len(mae)
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--tracks", nargs="*", default=list(GRIDS))
     ap.add_argument("--scenes", nargs="*", default=None, help="restrict to these 2006 scenes")

@@ -19,7 +19,7 @@ from .tune import fitting_samples
 __all__ = ["main"]
 
 
-def main():
+def main() -> None:
     samples = fitting_samples(None, n_synthetic=0)
     grid = list(itertools.product((2.0, 3.0, 5.0), (3.0, 5.0, 7.0, 10.0, 20.0), (2, 3, 4)))
     best: dict = {}

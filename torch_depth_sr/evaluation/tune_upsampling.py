@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from typing import Iterable, Optional, Sequence
 
 import numpy as np
 import torch
@@ -38,7 +39,7 @@ DEFAULT_TRIALS = (
 )
 
 
-def upsampling_fitting_samples(factors=(2, 4), sigma: float = 5.0):
+def upsampling_fitting_samples(factors: Sequence[int] = (2, 4), sigma: float = 5.0) -> list[dict]:
     from .._data_root import data_root
     from ..datasets.discover import find_scenes
     from ..fill import fill_holes
@@ -63,13 +64,13 @@ def upsampling_fitting_samples(factors=(2, 4), sigma: float = 5.0):
     return out
 
 
-def score(config: RestorerConfig, samples) -> dict:
+def score(config: RestorerConfig, samples: Iterable[dict]) -> dict:
     """Mean MAE per factor."""
     per_factor = errors_by(DepthRestorer(config), samples, "factor", metric="mae")
     return {f: float(np.mean(v)) for f, v in sorted(per_factor.items())}
 
 
-def main(argv=None):
+def main(argv: Optional[Sequence[str]] = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--trials", nargs="*", default=None, help="JSON dicts of RestorerConfig overrides")
     args = p.parse_args(argv)
