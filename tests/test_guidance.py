@@ -113,3 +113,26 @@ class TestGuidedRestorer:
             RestorerConfig(guidance_net=1)
         with pytest.raises(ParameterError, match="guidance_channels"):
             RestorerConfig(guidance_channels=0)
+
+
+class TestShippedAndBench:
+    def test_shipped_guided_model_loads_with_its_network(self):
+        m = DepthRestorer.from_pretrained("denoise-guided")
+        assert m.config.guidance_net and m.guidance is not None
+        assert not any(p.requires_grad for p in m.parameters())
+        heads = torch.cat([p.flatten() for p in m.guidance.heads.parameters()])
+        assert heads.abs().max() > 0  # trained: the maps are not all 1
+
+    def test_bench_trained_method_loads_a_candidate_folder(self, scene, tmp_path):
+        from torch_depth_sr.errors import UsageError
+        from torch_depth_sr.evaluation.bench import _parse_pretrained
+        from torch_depth_sr.evaluation.methods import run_method
+
+        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=4, **SMALL), seed=2)
+        m.save(tmp_path / "candidate")
+        sample = {"depth": scene["depth"][0], "rgb": scene["rgb"][0]}
+        out = run_method("trained", sample, pretrained=_parse_pretrained(str(tmp_path / "candidate")))
+        assert torch.equal(out, m(scene["depth"], scene["rgb"]))
+        assert _parse_pretrained(None) is None
+        with pytest.raises(UsageError, match="not a saved model folder"):
+            _parse_pretrained(str(tmp_path))

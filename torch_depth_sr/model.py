@@ -330,8 +330,8 @@ class DepthRestorer(nn.Module):
     def from_pretrained(cls, name: str, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
         """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README).
 
-        Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'upsample-x4'``
-        where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
+        Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same
+        with the guidance network's per-pixel thresholds), ``'upsample-x4'`` where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
 
         Examples:
             >>> DepthRestorer.from_pretrained("denoise").config.num_layers  # doctest: +SKIP

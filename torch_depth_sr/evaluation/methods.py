@@ -57,6 +57,8 @@ def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[s
         return DepthRestorer.load(pretrained).to(device)
     if name == "trained":
         return DepthRestorer.from_pretrained("denoise").to(device)
+    if name == "trained-guided":  # with the guidance network's per-pixel thresholds (issue 14)
+        return DepthRestorer.from_pretrained("denoise-guided").to(device)
     if name == "trained-x4":
         return DepthRestorer.from_pretrained("upsample-x4").to(device)
     if name == "full-fast":
@@ -103,8 +105,8 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             from ..baselines import dictionary_denoise
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
-        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-x4"):
+        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-guided", "trained-x4"):
             return _model(name, device, json.dumps(config or {}, sort_keys=True),
                           pretrained if name in ("trained", "trained-x4") else None)(y, rgb)
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
-                     "and 'full-fast', 'paper-model', 'trained', 'trained-x4'.")
+                     "and 'full-fast', 'paper-model', 'trained', 'trained-guided', 'trained-x4'.")

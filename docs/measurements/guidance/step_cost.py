@@ -64,10 +64,10 @@ def main() -> None:
 
 def _peak_live_bytes(prof) -> int:
     """Peak of the running sum of CPU allocations and frees recorded by the profiler."""
-    events = sorted((e for e in prof.events() if e.cpu_memory_usage != 0), key=lambda e: e.time_range.start)
+    events = sorted((e for e in prof.events() if e.self_cpu_memory_usage != 0), key=lambda e: e.time_range.start)
     live = peak = 0
     for e in events:
-        live += e.cpu_memory_usage
+        live += e.self_cpu_memory_usage
         peak = max(peak, live)
     return peak
 
