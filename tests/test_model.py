@@ -28,13 +28,18 @@ class TestDepthRestorer:
         assert len(m.layers) == 8
         assert not any(p.requires_grad for p in m.parameters())
 
-    def test_trainable_parameters_get_gradients(self, scene):
-        m = DepthRestorer(trainable=True, **SMALL)
+    @pytest.mark.parametrize("guidance_net", [False, True])
+    def test_trainable_parameters_get_gradients(self, scene, guidance_net):
+        m = DepthRestorer(trainable=True, guidance_net=guidance_net, **SMALL)
         out = m(scene["depth"], scene["rgb"])
         loss = ((out - scene["gt"]) ** 2 * scene["mask"]).mean()
         loss.backward()
         expected = {f"layers.{i}.raw_{n}" for i in range(SMALL["num_layers"])
                     for n in ("lam", "eta", "gamma", "mu1", "mu2")} | {"log_temperature"}
+        if guidance_net:  # the guidance network's convolutions and one head per layer
+            expected |= {f"guidance.{c}.{w}" for c in ("guide.0", "guide.2", "state", "mix")
+                         for w in ("weight", "bias")}
+            expected |= {f"guidance.heads.{i}.{w}" for i in range(SMALL["num_layers"]) for w in ("weight", "bias")}
         assert {n for n, p in m.named_parameters() if p.requires_grad} == expected  # ρ is a buffer: it picks matches
         got = {n for n, p in m.named_parameters() if p.grad is not None and bool(torch.isfinite(p.grad).all())}
         assert got == expected

@@ -164,18 +164,38 @@ def test_example_quickstart():
     assert r.returncode == 0 and "restored RMSE" in r.stdout, r.stderr[-2000:]
 
 
-def test_every_parameter_that_requires_grad_gets_a_finite_gradient():
-    """Issue 10 item 3: the parameters that learn are exactly the ones that get gradients."""
+@pytest.mark.parametrize("guidance_net", [False, True])
+def test_every_parameter_that_requires_grad_gets_a_finite_gradient(guidance_net):
+    """Issue 10 item 3: the parameters that learn are exactly the ones that get gradients (issue 14: the
+    guidance network's weights too)."""
     from torch_depth_sr import DepthRestorer
     from torch_depth_sr.datasets.synthetic import make_scene
 
     s = make_scene(40, 48, seed=2)
     g = torch.Generator().manual_seed(0)
     y = (s["gt"] + 3 * torch.randn(s["gt"].shape, generator=g)).clamp_min(1)[None]
-    model = DepthRestorer(trainable=True, num_layers=3)
+    model = DepthRestorer(trainable=True, num_layers=3, guidance_net=guidance_net)
     loss = (model(y, s["rgb"][None]) - s["gt"][None]).square().mean()
     loss.backward()
     trainable = {n for n, p in model.named_parameters() if p.requires_grad}
     with_grad = {n for n, p in model.named_parameters() if p.grad is not None and torch.isfinite(p.grad).all()}
     assert trainable == with_grad, sorted(trainable ^ with_grad)
     assert "log_color_weight" not in trainable and "log_temperature" in trainable
+    assert any(n.startswith("guidance.") for n in trainable) == guidance_net
+
+
+def test_guided_training_starts_from_a_scalar_model_and_learns_the_network(tmp_path):
+    """--init of a model without a guidance network and --model '{"guidance_net": true}': the scalars are loaded,
+    the network starts untrained (multiplies by 1) and learns at its own rate; the checkpoint resumes."""
+    scalar = DepthRestorer(**TINY, lam=0.7)
+    scalar.save(tmp_path / "scalar")
+    cfg = tiny_config(tmp_path / "run", steps=2, val_every=0, init=str(tmp_path / "scalar"),
+                      model={"guidance_net": True, "guidance_channels": 4}, guidance_lr=1e-2)
+    model = train(cfg)
+    assert model.config.guidance_net and model.config.lam == 0.7
+    heads = torch.cat([p.detach().flatten() for p in model.guidance.heads.parameters()])
+    assert heads.abs().max() > 0  # moved from its zero start
+    _, opt_state, _ = load_checkpoint(tmp_path / "run" / "checkpoint")
+    assert len(opt_state["param_groups"]) == 2
+    loaded = DepthRestorer.load(tmp_path / "run" / "last")
+    assert torch.equal(_params(loaded), _params(model))

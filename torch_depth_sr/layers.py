@@ -31,6 +31,7 @@ from torch import nn
 
 from .block_matching import BlockMatches, block_match, refine_matches
 from .config import BlockMatchingConfig, LayerConfig, RestorerConfig, SingularConfig, SolverConfig
+from .guidance import PreparedGuidance
 from .nonlocal_prior import nonlocal_terms
 from .operators import Degradation, grad, grad_adjoint, laplacian
 from .shrinkage import group_soft_threshold, soft_threshold
@@ -111,6 +112,8 @@ class RestorationContext:
     supported: Optional[torch.Tensor] = None
     # (B,1,1,1) bool: samples the last singular test's gate found free of singular pixels (None before a test)
     clean: Optional[torch.Tensor] = None
+    # the guidance network with this forward's colour features (RestorerConfig.guidance_net), or None
+    guidance: Optional[PreparedGuidance] = None
 
 
 def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor, settings: BlockMatchingConfig,
@@ -168,14 +171,22 @@ class UnrolledLayer(nn.Module):
         lam, eta, gamma, mu1, mu2 = self.upsampling.layer_weights(K, *(self.value(n).to(dt) for n in self.names))
         shrink = group_soft_threshold if t.isotropic else soft_threshold
         dx = grad(s.x)  # (B,2,H,W)
-        z = shrink(dx, lam / mu1)
+        residual = ctx.y - K(s.x)  # (B,1,h,w)
+        tv_thr, nl_thr, gamma_thr = lam / mu1, None, gamma
+        if ctx.guidance is not None:  # per-pixel multipliers of the thresholds (issue 14)
+            maps = ctx.guidance.maps(self.index, s.x, s.q, residual * ctx.observed)
+            # the group (isotropic) threshold takes the geometric mean of the two directions' multipliers
+            tv_thr = tv_thr * (maps.tv.prod(1, keepdim=True).sqrt() if t.isotropic else maps.tv)
+            gamma_thr = gamma * maps.outlier
+        z = shrink(dx, tv_thr)
         if t.use_nonlocal:
             if ctx.clean is not None and t.eta_clean != 1.0:  # samples without outliers: α matters less
                 eta = eta * torch.where(ctx.clean, torch.full_like(eta, t.eta_clean), torch.ones_like(eta))
-            w = soft_threshold(dx - s.alpha, eta / mu2)
+            nl_thr = eta / mu2 if ctx.guidance is None else eta / mu2 * maps.nonlocal_
+            w = soft_threshold(dx - s.alpha, nl_thr)
         else:
             w, mu2 = s.w, torch.zeros_like(mu2)
-        e = s.q * soft_threshold(ctx.y - K(s.x), gamma) if t.use_outliers else s.e
+        e = s.q * soft_threshold(residual, gamma_thr) if t.use_outliers else s.e
         matches, alpha, q, conf = s.matches, s.alpha, s.q, s.confidence
         dev = s.x.device
         if matches is not None and self.index in self.matching.match_layers:

@@ -29,6 +29,7 @@ from .config import (ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, InitConfig, Restor
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .fill import fill_holes
+from .guidance import GuidanceNet
 from .layers import RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage
 from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
@@ -74,7 +75,9 @@ class DepthRestorer(nn.Module):
     Frozen (``trainable=False``, the default) it is the paper's algorithm as a fixed
     preprocessing stage and no parameter requires grad. Trainable, every layer's λ, η, γ, μ₁, μ₂,
     the block-matching temperature ``h`` receive gradients (the colour weight ``ρ`` only picks the matches,
-    a discrete choice, so it is a fixed buffer).
+    a discrete choice, so it is a fixed buffer). With ``guidance_net=True`` a small CNN,
+    :class:`~torch_depth_sr.guidance.GuidanceNet` (attribute ``guidance``), makes the layers' thresholds per-pixel
+    maps; it is trained with the rest and, untrained, changes nothing.
 
     Args:
         config: a :class:`RestorerConfig` (defaults: the tuned frozen parameters).
@@ -109,6 +112,10 @@ class DepthRestorer(nn.Module):
         # ρ weighs colour in the block distance, which picks the matches: a discrete choice with no gradient, so
         # ρ is a buffer, not a parameter (same state-dict key as before, so saved models still load)
         self.register_buffer("log_color_weight", torch.tensor(max(config.color_weight, 1e-8)).log())
+        # per-pixel multipliers of the layers' thresholds (issue 14); None = the scalar model (no state-dict keys)
+        self.guidance: Optional[GuidanceNet] = None
+        if config.guidance_net:
+            self.guidance = GuidanceNet(config.num_layers, config.guidance_channels).requires_grad_(trainable)
 
     @classmethod
     def ablation(cls, name: str, **overrides) -> "DepthRestorer":
@@ -277,6 +284,8 @@ class DepthRestorer(nn.Module):
             x0 = upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise, degradation=K)
         elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
             ctx.prior = guided
+        if self.guidance is not None:  # colour features once per forward; each layer adds its state's
+            ctx.guidance = self.guidance.prepare(guide, like=x0)
         _, _, hh, ww = x0.shape
         zeros2 = x0.new_zeros(b, 2, hh, ww)
         alpha = zeros2
@@ -322,8 +331,8 @@ class DepthRestorer(nn.Module):
     def from_pretrained(cls, name: str, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
         """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README).
 
-        Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'upsample-x4'``
-        where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
+        Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same
+        with the guidance network's per-pixel thresholds), ``'upsample-x4'`` where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
 
         Examples:
             >>> DepthRestorer.from_pretrained("denoise").config.num_layers  # doctest: +SKIP

@@ -81,6 +81,18 @@ def _parse_config(text):
     return overrides
 
 
+def _parse_pretrained(folder):
+    """``--pretrained FOLDER`` for the ``trained`` methods, checked before any scene runs (None = the shipped)."""
+    if folder is None:
+        return None
+    from ..errors import UsageError
+
+    if not (Path(folder) / "config.json").is_file() or not (Path(folder) / "state_dict.pt").is_file():
+        raise UsageError(f"--pretrained {folder!r}: not a saved model folder (config.json and state_dict.pt, as "
+                         "DepthRestorer.save writes them, e.g. a training run's best/).")
+    return str(folder)
+
+
 def run_bench(args) -> int:
     from .._data_root import data_root
     from .report import metadata as _metadata, print_table as _print_table
@@ -99,6 +111,7 @@ def run_bench(args) -> int:
     if args.track == "real":
         methods = args.methods or ["input", "jbf", "full"]
     config = _parse_config(getattr(args, "config", None))
+    pretrained = _parse_pretrained(getattr(args, "pretrained", None))
     results = []
     items = list(_samples(args.track, root, args.scenes, args.sigma))
     bar = tqdm(total=len(items) * len(methods), desc=f"bench {args.track}", unit="run")
@@ -106,7 +119,7 @@ def run_bench(args) -> int:
         preds = {}
         for m in methods:
             t0 = time.perf_counter()
-            pred = run_method(m, sample, args.device, config, track=args.track).cpu()
+            pred = run_method(m, sample, args.device, config, track=args.track, pretrained=pretrained).cpu()
             secs = time.perf_counter() - t0
             preds[m] = pred
             row = {"track": args.track, "scene": rec.name, "dataset": rec.dataset, "method": m,
@@ -130,7 +143,8 @@ def run_bench(args) -> int:
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         meta = _metadata(args.device)
-        meta.update(track=args.track, sigma=args.sigma, data=str(root), config_overrides=config or {})
+        meta.update(track=args.track, sigma=args.sigma, data=str(root), config_overrides=config or {},
+                    pretrained=pretrained)
         Path(args.json).write_text(json.dumps({"metadata": meta, "summary": summary, "results": results}, indent=1))
         print(f"json: {args.json}")
     return 0

@@ -50,11 +50,15 @@ RGF_PARAMS = {"paper": dict(sigma_space=3.0, sigma_color=7.0, iterations=3),
 
 
 @lru_cache(maxsize=None)
-def _model(name: str, device: str, overrides: str = "{}"):
+def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[str] = None):
     from ..model import DepthRestorer
 
+    if name in ("trained", "trained-x4") and pretrained is not None:  # a candidate before it ships
+        return DepthRestorer.load(pretrained).to(device)
     if name == "trained":
         return DepthRestorer.from_pretrained("denoise").to(device)
+    if name == "trained-guided":  # with the guidance network's per-pixel thresholds (issue 14)
+        return DepthRestorer.from_pretrained("denoise-guided").to(device)
     if name == "trained-x4":
         return DepthRestorer.from_pretrained("upsample-x4").to(device)
     if name == "full-fast":
@@ -65,12 +69,14 @@ def _model(name: str, device: str, overrides: str = "{}"):
 
 
 def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[dict] = None,
-               track: Optional[str] = None) -> torch.Tensor:
+               track: Optional[str] = None, pretrained: Optional[str] = None) -> torch.Tensor:
     """Run ``name`` on a sample dict (``depth (1,h,w)``, ``rgb (3,H,W)``, optional ``factor``).
 
     ``config``: :class:`~torch_depth_sr.RestorerConfig` overrides for the model methods (``tv``, ``tv+nl``,
     ``full``), e.g. ``{"block_size": 5}``; the shipped ``trained`` parameters and the baselines ignore it.
     ``track``: the benchmark track; ``jbf`` and ``rgf`` have settings fitted per track (``paper`` when not given).
+    ``pretrained``: a folder written by :meth:`~torch_depth_sr.DepthRestorer.save` (a training run's ``best``) that
+    ``trained`` and ``trained-x4`` load instead of the shipped parameters.
     """
     y = sample["depth"][None].to(device)
     rgb = sample["rgb"][None].to(device)
@@ -99,7 +105,8 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             from ..baselines import dictionary_denoise
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
-        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-x4"):
-            return _model(name, device, json.dumps(config or {}, sort_keys=True))(y, rgb)
+        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-guided", "trained-x4"):
+            return _model(name, device, json.dumps(config or {}, sort_keys=True),
+                          pretrained if name in ("trained", "trained-x4") else None)(y, rgb)
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
-                     "and 'full-fast', 'paper-model', 'trained', 'trained-x4'.")
+                     "and 'full-fast', 'paper-model', 'trained', 'trained-guided', 'trained-x4'.")

@@ -27,6 +27,8 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--batch-size", type=int, default=d.batch_size, help="per process")
     p.add_argument("--crop", type=int, default=d.crop)
     p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--guidance-lr", type=float, default=d.guidance_lr,
+                   help="learning rate of the guidance network's weights (--model '{\"guidance_net\": true}')")
     p.add_argument("--weight-decay", type=float, default=d.weight_decay)
     p.add_argument("--loss", choices=["l2", "l1"], default=d.loss)
     p.add_argument("--degradation", choices=["paper", "sensor", "mixed"], default=d.degradation)
@@ -53,7 +55,8 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
 
 def config_from_args(args) -> TrainConfig:
     return TrainConfig(out=args.out, data=args.data, steps=args.steps, batch_size=args.batch_size, crop=args.crop,
-                       lr=args.lr, weight_decay=args.weight_decay, loss=args.loss, degradation=args.degradation,
+                       lr=args.lr, guidance_lr=args.guidance_lr, weight_decay=args.weight_decay, loss=args.loss,
+                       degradation=args.degradation,
                        sigma=tuple(args.sigma), val_sigma=args.val_sigma, scale_factor=args.scale_factor,
                        synthetic=args.synthetic, use_middlebury=not args.synthetic_only,
                        val_scenes=tuple(args.val_scenes), val_size=args.val_size, val_every=args.val_every,

@@ -1,8 +1,9 @@
 r"""End-to-end training of the unrolled restorer's parameters.
 
 What is learned: every layer's raw (softplus) λ, η, γ, μ₁, μ₂, the log block-matching
-temperature and the log colour weight of ``DepthRestorer(trainable=True)`` — all of
-``model.parameters()`` — by AdamW through all layers (block-matching indices and the binary Q
+temperature and, with ``--model '{"guidance_net": true}'``, the weights of the guidance network
+(at their own learning rate ``guidance_lr``) of ``DepthRestorer(trainable=True)`` — all of
+``model.parameters()`` that require grad — by AdamW through all layers (block-matching indices and the binary Q
 carry no gradient; the weights ω = softmax(−d/h) do). The loss is the mean squared (``l2``) or
 absolute (``l1``) error on the pixels where the ground truth is known (``gt mask``).
 
@@ -47,6 +48,9 @@ class TrainConfig:
     batch_size: int = 4
     crop: int = 96
     lr: float = 0.03
+    # learning rate of the guidance network's weights (RestorerConfig.guidance_net), which start at 0 in the heads:
+    # Adam moves every weight by about lr per step, and the scalars' 0.03 would saturate the multipliers at once
+    guidance_lr: float = 1e-3
     weight_decay: float = 0.0
     loss: str = "l2"  # "l2" or "l1", on gt-valid pixels
     degradation: str = "mixed"  # paper | sensor | mixed
@@ -171,9 +175,24 @@ def _initial_model(cfg: TrainConfig) -> DepthRestorer:
         else:
             base = DepthRestorer.from_pretrained(cfg.init)
         model = DepthRestorer(base.config.replace(**cfg.model), trainable=True)
-        model.load_state_dict(base.state_dict())
+        # a guidance network switched on by cfg.model starts untrained (it multiplies by 1): only its keys may miss
+        missing, unexpected = model.load_state_dict(base.state_dict(), strict=False)
+        if unexpected or any(not k.startswith("guidance.") for k in missing):
+            raise RuntimeError(f"--init {cfg.init} does not fit the model of --model {cfg.model}: missing "
+                               f"{missing[:4]}, unexpected {unexpected[:4]}")
         return model
     return DepthRestorer(RestorerConfig(), trainable=True, **cfg.model)
+
+
+def _param_groups(model: DepthRestorer, cfg: TrainConfig) -> list[dict]:
+    """The optimiser's groups: the layers' scalars and the temperature at ``cfg.lr``; the guidance network's
+    weights, when the model has one, at ``cfg.guidance_lr`` (always in this order, so a checkpoint resumes)."""
+    net = [p for n, p in model.named_parameters() if p.requires_grad and n.startswith("guidance.")]
+    scalars = [p for n, p in model.named_parameters() if p.requires_grad and not n.startswith("guidance.")]
+    groups = [{"params": scalars, "lr": cfg.lr}]
+    if net:
+        groups.append({"params": net, "lr": cfg.guidance_lr})
+    return groups
 
 
 def train(cfg: TrainConfig) -> DepthRestorer:
@@ -198,15 +217,18 @@ def train(cfg: TrainConfig) -> DepthRestorer:
         model, opt_state = _initial_model(cfg), None
     model = model.to(device)
     params = [p for p in model.parameters() if p.requires_grad]
-    opt = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+    groups = _param_groups(model, cfg)
+    opt = torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
     if opt_state is not None:
         opt.load_state_dict(opt_state)
 
+    bases = [g["lr"] for g in groups]
+
     def set_lr(s: int) -> float:  # cosine from lr to lr/10, a pure function of the step (exact on resume)
-        lr = cfg.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.steps) / max(1, cfg.steps))))
-        for g in opt.param_groups:
-            g["lr"] = lr
-        return lr
+        f = 0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * min(s, cfg.steps) / max(1, cfg.steps)))
+        for g, base in zip(opt.param_groups, bases):
+            g["lr"] = base * f
+        return cfg.lr * f
 
     net = model
     if distributed:

@@ -1,0 +1,138 @@
+"""The guidance network (issue 14 item 2): per-pixel multipliers of the layers' thresholds."""
+import math
+
+import pytest
+import torch
+
+from torch_depth_sr import DepthRestorer, ParameterError, RestorerConfig
+from torch_depth_sr.guidance import MAX_LOG_MULTIPLIER, GuidanceMaps, GuidanceNet
+
+SMALL = dict(num_layers=3, search_window=9, k=4)
+
+
+def _perturb(model: DepthRestorer, seed: int = 0, scale: float = 0.5) -> DepthRestorer:
+    """Give every weight of the guidance network (heads included) a random value, so its maps differ from 1."""
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for p in model.guidance.parameters():
+            p.copy_(scale * torch.randn(p.shape, generator=g))
+    return model
+
+
+class TestGuidanceNet:
+    def test_untrained_maps_are_exactly_one(self):
+        net = GuidanceNet(num_layers=2, channels=8)
+        x = torch.randn(2, 1, 20, 24)
+        maps = net.prepare(torch.rand(2, 3, 20, 24)).maps(1, x, torch.ones_like(x), torch.randn_like(x))
+        assert isinstance(maps, GuidanceMaps)
+        assert maps.tv.shape == (2, 2, 20, 24) and maps.nonlocal_.shape == (2, 2, 20, 24)
+        assert maps.outlier.shape == (2, 1, 20, 24)
+        assert all(bool((m == 1).all()) for m in maps)
+
+    def test_multipliers_are_bounded_and_the_outlier_map_lives_on_the_observation_grid(self):
+        net = GuidanceNet(num_layers=1, channels=4)
+        with torch.no_grad():
+            for p in net.parameters():
+                p.fill_(5.0)  # saturates the tanh
+        x = torch.randn(1, 1, 16, 16)
+        q = torch.ones(1, 1, 4, 4)  # ×4 upsampling: Q and the residual are coarser
+        maps = net.prepare(torch.rand(1, 3, 16, 16)).maps(0, x, q, torch.zeros_like(q))
+        assert maps.outlier.shape == (1, 1, 4, 4) and maps.tv.shape == (1, 2, 16, 16)
+        lo, hi = math.exp(-MAX_LOG_MULTIPLIER), math.exp(MAX_LOG_MULTIPLIER)
+        for m in maps:
+            assert bool(((m >= lo * (1 - 1e-6)) & (m <= hi * (1 + 1e-6))).all())
+
+    def test_no_colour_guide_runs(self):
+        net = GuidanceNet(num_layers=1, channels=4)
+        x = torch.randn(1, 1, 12, 12)
+        assert net.prepare(None, like=x).guide_features.shape == (1, 4, 12, 12)
+        with pytest.raises(ValueError, match="like"):
+            net.prepare(None)
+
+    def test_exception(self):
+        with pytest.raises(ValueError, match="num_layers"):
+            GuidanceNet(num_layers=0)
+
+
+class TestGuidedRestorer:
+    def test_off_by_default_and_no_state_keys(self):
+        m = DepthRestorer(**SMALL)
+        assert m.guidance is None and not any(k.startswith("guidance") for k in m.state_dict())
+
+    @pytest.mark.parametrize("scale_factor", [1, 4])
+    def test_untrained_network_leaves_the_output_bit_identical(self, scene, scale_factor):
+        depth = scene["depth"]
+        if scale_factor > 1:
+            depth = torch.nn.functional.avg_pool2d(scene["gt"], scale_factor) + 0.5
+        plain = DepthRestorer(**SMALL)(depth, scene["rgb"])
+        guided = DepthRestorer(guidance_net=True, **SMALL)
+        assert guided.guidance is not None
+        assert torch.equal(guided(depth, scene["rgb"]), plain)
+        # trainable, the forward runs with autograd (the scalar model then differs from its frozen self by an ulp)
+        plain_t = DepthRestorer(trainable=True, **SMALL)(depth, scene["rgb"]).detach()
+        trainable = DepthRestorer(guidance_net=True, trainable=True, **SMALL)
+        assert torch.equal(trainable(depth, scene["rgb"]).detach(), plain_t)
+
+    def test_isotropic_untrained_is_bit_identical(self, scene):
+        plain = DepthRestorer(isotropic=True, **SMALL)(scene["depth"], scene["rgb"])
+        guided = DepthRestorer(isotropic=True, guidance_net=True, **SMALL)(scene["depth"], scene["rgb"])
+        assert torch.equal(guided, plain)
+
+    def test_trained_network_changes_the_output_and_every_weight_gets_a_gradient(self, scene):
+        plain = DepthRestorer(**SMALL)(scene["depth"], scene["rgb"])
+        m = _perturb(DepthRestorer(guidance_net=True, trainable=True, guidance_channels=4, **SMALL))
+        out = m(scene["depth"], scene["rgb"])
+        assert torch.isfinite(out).all() and not torch.equal(out.detach(), plain)
+        ((out - scene["gt"]) ** 2 * scene["mask"]).mean().backward()
+        for n, p in m.guidance.named_parameters():  # with nonzero heads the gradient reaches the whole network
+            assert p.grad is not None and torch.isfinite(p.grad).all() and p.grad.abs().sum() > 0, n
+
+    def test_save_load_round_trip(self, scene, tmp_path):
+        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=6, **SMALL), seed=1)
+        m.save(tmp_path / "guided")
+        back = DepthRestorer.load(tmp_path / "guided")
+        assert back.config.guidance_net and back.config.guidance_channels == 6
+        assert torch.equal(back(scene["depth"], scene["rgb"]), m(scene["depth"], scene["rgb"]))
+        state = torch.load(tmp_path / "guided" / "state_dict.pt", weights_only=True)
+        assert any(k.startswith("guidance.heads.2.") for k in state)
+
+    def test_a_model_saved_without_the_field_loads_as_the_scalar_model(self, tmp_path):
+        m = DepthRestorer(**SMALL)
+        m.save(tmp_path / "old")
+        cfg = (tmp_path / "old" / "config.json")
+        text = cfg.read_text()
+        for f in ("guidance_net", "guidance_channels"):  # a config.json written before the fields existed
+            text = "\n".join(line for line in text.splitlines() if f'"{f}"' not in line)
+        cfg.write_text(text)
+        assert DepthRestorer.load(tmp_path / "old").guidance is None
+
+    def test_config_fields_are_checked_and_belong_to_the_layer_group(self):
+        c = RestorerConfig(guidance_net=True, guidance_channels=8)
+        assert c.layer.guidance_net and c.layer.guidance_channels == 8
+        with pytest.raises(ParameterError, match="guidance_net"):
+            RestorerConfig(guidance_net=1)
+        with pytest.raises(ParameterError, match="guidance_channels"):
+            RestorerConfig(guidance_channels=0)
+
+
+class TestShippedAndBench:
+    def test_shipped_guided_model_loads_with_its_network(self):
+        m = DepthRestorer.from_pretrained("denoise-guided")
+        assert m.config.guidance_net and m.guidance is not None
+        assert not any(p.requires_grad for p in m.parameters())
+        heads = torch.cat([p.flatten() for p in m.guidance.heads.parameters()])
+        assert heads.abs().max() > 0  # trained: the maps are not all 1
+
+    def test_bench_trained_method_loads_a_candidate_folder(self, scene, tmp_path):
+        from torch_depth_sr.errors import UsageError
+        from torch_depth_sr.evaluation.bench import _parse_pretrained
+        from torch_depth_sr.evaluation.methods import run_method
+
+        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=4, **SMALL), seed=2)
+        m.save(tmp_path / "candidate")
+        sample = {"depth": scene["depth"][0], "rgb": scene["rgb"][0]}
+        out = run_method("trained", sample, pretrained=_parse_pretrained(str(tmp_path / "candidate")))
+        assert torch.equal(out, m(scene["depth"], scene["rgb"]))
+        assert _parse_pretrained(None) is None
+        with pytest.raises(UsageError, match="not a saved model folder"):
+            _parse_pretrained(str(tmp_path))

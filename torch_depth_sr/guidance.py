@@ -1,0 +1,150 @@
+r"""A small convolutional guidance network that turns the layers' scalar weights into per-pixel maps.
+
+Issue 14 item 2 ("more capacity, same structure"). The trainable model learns five positive scalars per layer;
+with ``RestorerConfig(guidance_net=True)`` a :class:`GuidanceNet`, shared by all layers, predicts from the colour
+image and the current estimate per-pixel multipliers of the layer's thresholds:
+
+.. math::
+    z &= \operatorname{soft}\big(Dx,\ m^{\mathrm{tv}}_k \odot \lambda_k/\mu_{1,k}\big) \\
+    w &= \operatorname{soft}\big(Dx-\alpha,\ m^{\mathrm{nl}}_k \odot \eta_k/\mu_{2,k}\big) \\
+    e &= Q \odot \operatorname{soft}\big(y-Kx,\ m^{\gamma}_k \odot \gamma_k\big)
+
+with :math:`m = \exp(c \tanh(r))`, :math:`r` the network's output for layer :math:`k` and :math:`c = \log 4` (every
+multiplier in [1/4, 4]). ``m^tv`` and ``m^nl`` have one channel per gradient direction (horizontal, vertical).
+The multipliers act on elementwise quantities only, so the linear system of the x-update (and its CG) is the
+scalar model's. The last layer of every head is zero-initialised: the untrained network multiplies by exactly 1,
+and the model starts from the scalar one, bit for bit.
+
+Architecture (``C = channels``): the colour image, centred, goes through two 3×3 convolutions once per forward
+(:meth:`GuidanceNet.encode_guide`); each layer adds a 3×3 convolution of five features of its current state
+(``log(1+|Dx|)`` in both directions, the estimate minus its 5×5 mean, the trusted set ``Q`` and the residual
+``y − Kx`` on measured pixels, the last two compressed by ``tanh(·/4)``; all without gradient), then one shared
+3×3 convolution and a per-layer 1×1 head with five outputs. The state is in the model's normalised units (the
+noise σ), so the features do not depend on the depth's unit.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Optional
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from .operators import grad
+
+__all__ = ["GuidanceMaps", "GuidanceNet", "PreparedGuidance", "STATE_FEATURES", "MAX_LOG_MULTIPLIER"]
+
+STATE_FEATURES = 5
+"""Channels of the per-layer state features (see :meth:`GuidanceNet.state_features`)."""
+
+MAX_LOG_MULTIPLIER = math.log(4.0)
+"""Every multiplier lies in ``[exp(-c), exp(c)]`` with this ``c``: [1/4, 4]."""
+
+
+class GuidanceMaps(NamedTuple):
+    """Per-pixel multipliers of one layer's thresholds (all 1 for the untrained network).
+
+    ``tv`` (B,2,H,W) multiplies λ/μ₁ per gradient direction, ``nonlocal_`` (B,2,H,W) η/μ₂, ``outlier`` (B,1,h,w)
+    γ on the observation grid.
+    """
+
+    tv: torch.Tensor
+    nonlocal_: torch.Tensor
+    outlier: torch.Tensor
+
+
+class GuidanceNet(nn.Module):
+    """The guidance network of :mod:`torch_depth_sr.guidance` for a model of ``num_layers`` layers.
+
+    Args:
+        num_layers: number of unrolled layers (one output head each).
+        channels: feature channels of the convolutions.
+
+    Examples:
+        >>> net = GuidanceNet(num_layers=2, channels=8)
+        >>> sum(p.numel() for p in net.parameters())
+        1850
+        >>> rgb, x = torch.rand(1, 3, 16, 16), torch.randn(1, 1, 16, 16)
+        >>> maps = net.prepare(rgb).maps(0, x, torch.ones_like(x), torch.zeros_like(x))
+        >>> bool((maps.tv == 1).all() and (maps.outlier == 1).all())
+        True
+    """
+
+    outputs = 5  # tv (2 directions), nonlocal (2 directions), outlier
+
+    def __init__(self, num_layers: int, channels: int = 16):
+        super().__init__()
+        if num_layers < 1 or channels < 1:
+            raise ValueError(f"GuidanceNet needs num_layers >= 1 and channels >= 1; got {num_layers}, {channels}.")
+        c = channels
+        self.guide = nn.Sequential(_conv(3, c, 3), nn.ReLU(), _conv(c, c, 3), nn.ReLU())
+        self.state = _conv(STATE_FEATURES, c, 3)
+        self.mix = _conv(c, c, 3)
+        self.heads = nn.ModuleList(nn.Conv2d(c, self.outputs, 1) for _ in range(num_layers))
+        for h in self.heads:  # the untrained network multiplies every threshold by exactly 1
+            nn.init.zeros_(h.weight)
+            nn.init.zeros_(h.bias)
+
+    def encode_guide(self, rgb: Optional[torch.Tensor], like: torch.Tensor) -> torch.Tensor:
+        """Colour features ``(B,C,H,W)`` of ``rgb (B,3,H,W)`` in [0,1] (a mid-grey image when None), on the grid
+        and dtype of ``like (B,1,H,W)``."""
+        b, _, h, w = like.shape
+        if rgb is None:
+            rgb = like.new_full((b, 3, h, w), 0.5)
+        return self.guide(rgb.to(like.dtype) - 0.5)  # (B,C,H,W)
+
+    @staticmethod
+    @torch.no_grad()
+    def state_features(x: torch.Tensor, q: torch.Tensor, residual: torch.Tensor) -> torch.Tensor:
+        """The five state features ``(B,5,H,W)`` of the estimate ``x (B,1,H,W)`` (normalised units), the trusted
+        set ``q`` and the residual ``y − Kx`` on measured pixels (both (B,1,h,w), upsampled by repetition to the
+        output grid when coarser); computed without gradient."""
+        x = x.detach()
+        s = x.shape[-1] // q.shape[-1]
+        if s > 1:
+            q = F.interpolate(q.detach(), scale_factor=s, mode="nearest")
+            residual = F.interpolate(residual.detach(), scale_factor=s, mode="nearest")
+        mean = F.avg_pool2d(F.pad(x, (2, 2, 2, 2), mode="replicate"), 5, stride=1)
+        feats = [torch.log1p(grad(x).abs()), torch.tanh((x - mean) / 4), q.to(x.dtype), torch.tanh(residual / 4)]
+        return torch.cat(feats, 1)  # (B,5,H,W)
+
+    def raw(self, index: int, guide_features: torch.Tensor, state_features: torch.Tensor) -> torch.Tensor:
+        """The head's output ``r (B,5,H,W)`` of layer ``index`` (the log-multipliers are ``c·tanh(r)``)."""
+        h = F.relu(guide_features + self.state(state_features.to(guide_features.dtype)))
+        h = F.relu(self.mix(h))  # (B,C,H,W)
+        return self.heads[index](h)
+
+    def prepare(self, rgb: Optional[torch.Tensor], like: Optional[torch.Tensor] = None) -> "PreparedGuidance":
+        """Encode the colour image once per forward; the layers then ask :meth:`PreparedGuidance.maps`."""
+        if like is None:
+            if rgb is None:
+                raise ValueError("GuidanceNet.prepare needs rgb or a depth-shaped tensor `like`.")
+            like = rgb[:, :1]
+        return PreparedGuidance(self, self.encode_guide(rgb, like))
+
+    def extra_repr(self) -> str:
+        return f"layers={len(self.heads)}, parameters={sum(p.numel() for p in self.parameters())}"
+
+
+class PreparedGuidance:
+    """A :class:`GuidanceNet` with the colour features of one forward (what the layers receive)."""
+
+    def __init__(self, net: GuidanceNet, guide_features: torch.Tensor):
+        self.net, self.guide_features = net, guide_features
+
+    def maps(self, index: int, x: torch.Tensor, q: torch.Tensor, residual: torch.Tensor) -> GuidanceMaps:
+        """Layer ``index``'s :class:`GuidanceMaps` for the estimate ``x (B,1,H,W)``, the trusted set ``q`` and the
+        residual on measured pixels ``(B,1,h,w)``; the outlier map is averaged (in the log) to the ``(h,w)`` grid."""
+        feats = self.net.state_features(x, q, residual)
+        log_m = MAX_LOG_MULTIPLIER * torch.tanh(self.net.raw(index, self.guide_features, feats))  # (B,5,H,W)
+        log_m = log_m.to(x.dtype)
+        log_gamma = log_m[:, 4:5]
+        s = x.shape[-1] // q.shape[-1]
+        if s > 1:
+            log_gamma = F.avg_pool2d(log_gamma, s)  # (B,1,h,w)
+        return GuidanceMaps(tv=log_m[:, 0:2].exp(), nonlocal_=log_m[:, 2:4].exp(), outlier=log_gamma.exp())
+
+
+def _conv(cin: int, cout: int, k: int) -> nn.Conv2d:
+    return nn.Conv2d(cin, cout, k, padding=k // 2, padding_mode="replicate")
