@@ -5,6 +5,7 @@ import argparse
 import json
 import sys
 import time
+from typing import Optional, Sequence
 from pathlib import Path
 
 import torch
@@ -12,7 +13,7 @@ import torch
 from .evaluation.report import metadata as _metadata, print_table as _print_table
 
 
-def cmd_demo(args) -> int:
+def cmd_demo(args: argparse.Namespace) -> int:
     from .datasets.synthetic import make_scene
     from .degradations import SensorDegradation
     from .figures import comparison_figure
@@ -74,13 +75,13 @@ Exit status: 0 done, 1 a file could not be restored or written, 2 a usage mistak
 """
 
 
-def cmd_restore(args) -> int:
+def cmd_restore(args: argparse.Namespace) -> int:
     from .restore_files import restore_paths
 
     return restore_paths(args)
 
 
-def cmd_bench(args) -> int:
+def cmd_bench(args: argparse.Namespace) -> int:
     from .evaluation.bench import run_bench
 
     return run_bench(args)
@@ -186,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the command line; returns the exit status (0 done, 1 failure, 2 usage mistake), never raises
     except with ``--debug``, which lets the exception and its traceback through."""
     try:

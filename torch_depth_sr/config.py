@@ -7,9 +7,14 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from numbers import Integral, Real
-from typing import Any, Callable, ClassVar, Optional
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Optional
 
 from .errors import ModelFileError, ParameterError
+
+if TYPE_CHECKING:  # hints only: the config stays importable without torch's operators
+    import torch
+
+    from .operators import Degradation
 
 __all__ = [
     "ABLATIONS",
@@ -479,7 +484,8 @@ class UpsamplingConfig(_Group):
         d["upsample_scale"] = dataclasses.asdict(self.multipliers)
         return d
 
-    def layer_weights(self, degradation, lam, eta, gamma, mu1, mu2) -> tuple:
+    def layer_weights(self, degradation: Degradation, lam: torch.Tensor, eta: torch.Tensor, gamma: torch.Tensor,
+                      mu1: torch.Tensor, mu2: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """The layer's (λ, η, γ, μ₁, μ₂) for the degradation ``K``: unchanged when ``K = I``; under guided
         upsampling each times its multiplier, and λ divided by ``s = K.scale`` with ``tv_per_factor`` (TV of an
         s-times finer grid grows like s for the same surface; the quadratic terms do not)."""

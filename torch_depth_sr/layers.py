@@ -23,7 +23,7 @@ import math
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from typing import Optional
+from typing import Iterator, Optional
 
 import torch
 import torch.nn.functional as F
@@ -75,7 +75,7 @@ class RestorationState:
 
 
 @contextmanager
-def stage(timings: Optional[dict], name: str, device: torch.device):
+def stage(timings: Optional[dict], name: str, device: torch.device) -> Iterator[None]:
     """Accumulate the wall time of a stage into ``timings``; with ``timings=None`` nothing is timed.
 
     Timing synchronises CUDA before and after the stage (so the time is real), which a forward that is not
@@ -235,7 +235,8 @@ def _range_sigma(vp, clean: Optional[torch.Tensor]):
     return torch.where(clean, float(vp.range_clean), float(vp.range))
 
 
-def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatches, settings: SingularConfig):
+def singular_test(ctx: RestorationContext, x: torch.Tensor, matches: BlockMatches,
+                  settings: SingularConfig) -> tuple[torch.Tensor, torch.Tensor]:
     """Q and a soft confidence P(x_i) (0 at missing pixels) from the singular-pixel test (``K = I`` only)."""
     c = settings
     with torch.no_grad():

@@ -303,7 +303,7 @@ class DepthRestorer(nn.Module):
         """Each layer's positive parameter values, as floats."""
         return [layer.values() for layer in self.layers]
 
-    def save(self, directory) -> None:
+    def save(self, directory: Union[str, Path]) -> None:
         """Write ``config.json`` and ``state_dict.pt`` (tensors only; load with ``weights_only=True``)."""
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)
@@ -311,7 +311,8 @@ class DepthRestorer(nn.Module):
         torch.save(self.state_dict(), d / "state_dict.pt")
 
     @classmethod
-    def load(cls, directory, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
+    def load(cls, directory: Union[str, Path], trainable: bool = False,
+             map_location: Union[str, torch.device] = "cpu") -> "DepthRestorer":
         """Load what :meth:`save` wrote (never unpickles arbitrary objects).
 
         Raises:
@@ -328,7 +329,8 @@ class DepthRestorer(nn.Module):
         return model
 
     @classmethod
-    def from_pretrained(cls, name: str, trainable: bool = False, map_location="cpu") -> "DepthRestorer":
+    def from_pretrained(cls, name: str, trainable: bool = False,
+                        map_location: Union[str, torch.device] = "cpu") -> "DepthRestorer":
         """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README).
 
         Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same
@@ -346,7 +348,9 @@ class DepthRestorer(nn.Module):
         return cls.load(root / name, trainable=trainable, map_location=map_location)
 
 
-def initial_estimate(yn, observed, guide, factor: int, c: InitConfig | RestorerConfig, return_fill: bool = False):
+def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
+                     c: InitConfig | RestorerConfig, return_fill: bool = False
+                     ) -> Union[Optional[torch.Tensor], tuple[Optional[torch.Tensor], torch.Tensor, torch.Tensor]]:
     """x⁰ on the observation grid: a colour-guided normalised convolution, or push-pull without colour.
 
     ``c`` is the :class:`~torch_depth_sr.config.InitConfig` (or a whole :class:`RestorerConfig`, whose

@@ -1,6 +1,7 @@
 """``torch-depth-sr bench``: the protocols of ``shared/docs/benchmark.md`` on the data under ``--data``."""
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -93,7 +94,7 @@ def _parse_pretrained(folder):
     return str(folder)
 
 
-def run_bench(args) -> int:
+def run_bench(args: argparse.Namespace) -> int:
     from .._data_root import data_root
     from .report import metadata as _metadata, print_table as _print_table
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import Optional, Sequence
 
 from .train import TrainConfig
 
@@ -53,7 +54,7 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true")
 
 
-def config_from_args(args) -> TrainConfig:
+def config_from_args(args: argparse.Namespace) -> TrainConfig:
     return TrainConfig(out=args.out, data=args.data, steps=args.steps, batch_size=args.batch_size, crop=args.crop,
                        lr=args.lr, guidance_lr=args.guidance_lr, weight_decay=args.weight_decay, loss=args.loss,
                        degradation=args.degradation,
@@ -65,7 +66,7 @@ def config_from_args(args) -> TrainConfig:
                        progress=not args.no_progress)
 
 
-def cmd_train(args) -> int:
+def cmd_train(args: argparse.Namespace) -> int:
     """Run training from parsed arguments; prints where the results are."""
     from .train import train
 
@@ -80,7 +81,7 @@ def cmd_train(args) -> int:
     return 0
 
 
-def add_train_parser(subparsers) -> argparse.ArgumentParser:
+def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``train`` sub-command to an ``argparse`` sub-parser set."""
     p = subparsers.add_parser("train", help="learn the per-layer parameters end to end (torchrun for DDP)")
     _add_arguments(p)
@@ -88,7 +89,7 @@ def add_train_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def main(argv=None) -> int:
+def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(prog="torch-depth-sr train", description="Train the unrolled restorer.")
     _add_arguments(p)
     return cmd_train(p.parse_args(argv))

@@ -10,7 +10,8 @@ a resumed run (or another DDP rank) sees exactly the data it would have seen.
 """
 from __future__ import annotations
 
-from typing import Callable, Optional, Sequence, Tuple, Union
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import torch
@@ -18,12 +19,16 @@ from torch.utils.data import Dataset
 
 from ..errors import DepthSRError
 
+if TYPE_CHECKING:
+    from ..datasets.discover import SceneRecord
+
 KEYS = ("depth", "rgb", "gt", "mask", "name")
 DEGRADATIONS = ("paper", "sensor", "mixed", "none")
 
 
-def middlebury_records(root=None, years: Sequence[int] = (2006,), scenes: Optional[Sequence[str]] = None,
-                       exclude: Sequence[str] = (), allow_test_years: bool = False):
+def middlebury_records(root: Optional[Union[str, Path]] = None, years: Sequence[int] = (2006,),
+                       scenes: Optional[Sequence[str]] = None, exclude: Sequence[str] = (),
+                       allow_test_years: bool = False) -> list[SceneRecord]:
     """Scene records of ``find_scenes(root, 'paper')`` filtered by year and name."""
     from .._data_root import data_root
     from ..datasets.discover import find_scenes
@@ -74,8 +79,9 @@ class CropDataset(Dataset):
         (['depth', 'gt', 'mask', 'name', 'rgb'], (1, 32, 32), (3, 32, 32))
     """
 
-    def __init__(self, root=None, scenes: Optional[Sequence[str]] = None, exclude: Sequence[str] = (),
-                 years: Sequence[int] = (2006,), synthetic: int = 32, synthetic_size=(240, 320),
+    def __init__(self, root: Optional[Union[str, Path]] = None, scenes: Optional[Sequence[str]] = None,
+                 exclude: Sequence[str] = (), years: Sequence[int] = (2006,), synthetic: int = 32,
+                 synthetic_size: Tuple[int, int] = (240, 320),
                  synthetic_share: float = 0.5, synthetic_seed: int = 0, crop: Union[int, Tuple[int, int]] = 96,
                  length: int = 1000, degradation: Union[str, Callable] = "mixed",
                  sigma: Union[float, Tuple[float, float]] = (3.0, 8.0), scale_factor: int = 1, seed: int = 0,
@@ -169,10 +175,11 @@ class CropDataset(Dataset):
         return crop
 
 
-def make_datasets(root=None, crop: int = 96, train_length: int = 1000, val_length: int = 16,
-                  val_scenes: Sequence[str] = ("Cloth4", "Wood2"), synthetic: int = 32, sigma=(3.0, 8.0),
-                  val_sigma: float = 5.0, scale_factor: int = 1, degradation="mixed", seed: int = 0,
-                  use_middlebury: bool = True):
+def make_datasets(root: Optional[Union[str, Path]] = None, crop: int = 96, train_length: int = 1000,
+                  val_length: int = 16, val_scenes: Sequence[str] = ("Cloth4", "Wood2"), synthetic: int = 32,
+                  sigma: Union[float, Tuple[float, float]] = (3.0, 8.0), val_sigma: float = 5.0,
+                  scale_factor: int = 1, degradation: Union[str, Callable] = "mixed", seed: int = 0,
+                  use_middlebury: bool = True) -> tuple["CropDataset", dict[str, "CropDataset"]]:
     """Train set and one validation set per track.
 
     Validation uses the held-out 2006 scenes ``val_scenes`` and held-out synthetic scenes (seeds

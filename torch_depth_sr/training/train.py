@@ -27,11 +27,11 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Union
 
 import torch
 import torch.distributed as dist
-from torch.utils.data import DataLoader, Sampler
+from torch.utils.data import DataLoader, Dataset, Sampler
 
 from ..config import RestorerConfig
 from ..model import DepthRestorer
@@ -115,7 +115,8 @@ def masked_loss(pred: torch.Tensor, gt: torch.Tensor, mask: torch.Tensor, kind: 
 
 
 @torch.no_grad()
-def evaluate(model: DepthRestorer, dataset, device="cpu", batch_size: int = 4) -> dict:
+def evaluate(model: DepthRestorer, dataset: Dataset, device: Union[str, torch.device] = "cpu",
+             batch_size: int = 4) -> dict:
     """Mean over crops of the per-crop RMSE and MAE on gt-valid pixels (sharded across DDP ranks)."""
     rank, world = (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
     sums = torch.zeros(3, dtype=torch.float64)
@@ -159,7 +160,8 @@ def _save_checkpoint(folder: Path, model: DepthRestorer, opt, step: int, cfg: Tr
         tmp.rename(folder)
 
 
-def load_checkpoint(folder, device="cpu"):
+def load_checkpoint(folder: Union[str, Path], device: Union[str, torch.device] = "cpu"
+                    ) -> tuple[DepthRestorer, dict, dict]:
     """Read a checkpoint folder -> ``(model (trainable), optimizer_state, trainer_dict)``."""
     folder = Path(folder)
     model = DepthRestorer.load(folder, trainable=True, map_location=device)
