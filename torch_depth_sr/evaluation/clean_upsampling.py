@@ -1,7 +1,7 @@
 """Guided upsampling against bicubic interpolation on the guided-SR test images (issue 12, "do no harm").
 
 ``python -m torch_depth_sr.evaluation.clean_upsampling [--sets Middlebury Lu] [--scale 4] [--noise 0]
-[--images 03 09 ...] [--trials JSON ...]`` prints, per image, the RMSE of bicubic interpolation and of the model
+[--images 03 09 ...] [--trials JSON ...] [--noise-sigma S]`` prints, per image, the RMSE of bicubic interpolation and of the model
 for each trial (a JSON dict of ``RestorerConfig`` overrides; default: the defaults), then the means (all
 images, and the images that are not Middlebury 2006 fitting scenes) and on how many images each trial is
 worse than bicubic.
@@ -60,6 +60,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--noise", type=float, default=0.0)
     ap.add_argument("--images", nargs="*", default=None, help="file indices, e.g. 03 09 (default: all)")
     ap.add_argument("--trials", nargs="*", default=None, help="JSON dicts of RestorerConfig overrides")
+    ap.add_argument("--noise-sigma", type=float, default=None,
+                    help="pass this noise_sigma (grey levels) to the model instead of letting it estimate σ "
+                         "(0: the caller knows the input is noise-free)")
     ap.add_argument("--data", default=None)
     args = ap.parse_args(argv)
     trials = [json.loads(t) for t in args.trials] if args.trials else [{}]
@@ -76,7 +79,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             with torch.no_grad():
                 # the bicubic overshoot can make dark-edge inputs negative: missing for the model (as in `bench`)
                 lr_model = torch.where(lr > 0, lr, torch.full_like(lr, float("nan")))
-                errs = [rmse_grey(bicubic, gt)] + [rmse_grey(m(lr_model, guide), gt) for m in models]
+                errs = [rmse_grey(bicubic, gt)] + [rmse_grey(m(lr_model, guide, noise_sigma=args.noise_sigma), gt)
+                                                     for m in models]
             held_out = img.heldout
             rows.append((name, held_out, errs))
             print(f"{name:16s} " + "  ".join(f"{e:7.3f}" for e in errs), flush=True)
