@@ -149,7 +149,7 @@ class RestorerConfig:
     # value lies on a surface, not in the air: it stays trusted whatever its matched blocks say (0 = off; the
     # paper's test). Edges of clean maps match no block well and failed the test (issue 12).
     singular_support: int = 3
-    singular_support_tol: float = 3.0
+    singular_support_tol: float = 2.0
     # ... and so does a pixel on a chain of three agreeing pixels whose value lies beyond its disagreeing
     # neighbours' (a one-pixel gap or wire; a flying pixel lies between the sides of its edge)
     singular_line_support: bool = True
