@@ -99,7 +99,8 @@ def test_shipped_flat_configs_build_every_group(path):
     for g in GROUPS:
         getattr(c, g)
     model = DepthRestorer.from_pretrained(path.parent.name)
-    assert model.layers[0].singular == c.singular and model.initial == c.initial
+    assert model.layers[0].singular_detector.settings == c.singular
+    assert model.initializer.settings == c.initial
 
 
 def test_context_carries_the_operator_not_a_factor():

@@ -68,7 +68,7 @@ def test_layer_is_one_hand_written_hqs_step(use_nonlocal, use_outliers):
     matches = BlockMatches(torch.zeros_like(weight), index, weight)
     zeros2 = torch.zeros(1, 2, H, W, dtype=torch.float64)
     state = RestorationState(x=x, z=zeros2, w=zeros2, e=torch.zeros_like(y), alpha=alpha_old, q=q, confidence=q,
-                             matches=matches, cg_iterations=[])
+                             matches=matches)
     ctx = RestorationContext(y=y, observed=torch.ones_like(y), rgb=None, K=Identity(),
                              temperature=torch.tensor(0.5), color_weight=torch.tensor(400.0))
     out = layer(state, ctx)

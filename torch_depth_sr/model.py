@@ -24,16 +24,17 @@ from torch import nn
 
 from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import (ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, InitConfig, RestorerConfig,
-                     load_config_file)
+from .config import ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, RestorerConfig, load_config_file
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
-from .fill import fill_holes
 from .guidance import GuidanceNet
-from .layers import RestorationContext, RestorationState, UnrolledLayer, run_block_matching, singular_test, stage
+from .initial import Initializer, initial_estimate
+from .layers import UnrolledLayer
 from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
-from .operators import Degradation, area_downsample, degradation_operator, grad
+from .operators import Degradation, degradation_operator, grad
+from .stages import BlockMatcher, SingularDetector
+from .state import RestorationContext, RestorationState, RunLog
 from .upsampling import upsample_initial
 
 __all__ = [
@@ -103,10 +104,13 @@ class DepthRestorer(nn.Module):
         if config.num_layers < 1:
             raise ValueError(f"num_layers must be >= 1; got {config.num_layers}.")
         self.config = config
-        # the settings groups of the stages the model runs itself (x⁰, Q⁰, the first matches); the layers hold theirs
-        self.terms, self.initial, self.upsampling = config.layer, config.initial, config.upsampling
-        self.block_matching, self.singular = config.block_matching, config.singular
-        self.fidelity_band = config.fidelity_band
+        # the stages the model runs itself (x⁰, Q⁰, the first matches), each owning its settings group; the layers
+        # build theirs. ``terms`` says which terms the layers compute (whether x⁰ needs matches, Q⁰, a prior).
+        self.terms, self.fidelity_band = config.layer, config.fidelity_band
+        self.degradation = config.upsampling.degradation  # the name of K's kind; K itself is built per forward
+        self.initializer = Initializer(config.initial, config.upsampling)
+        self.block_matcher = BlockMatcher(config.block_matching)
+        self.singular_detector = SingularDetector(config.singular)
         self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
         self.log_temperature = nn.Parameter(torch.tensor(config.temperature).log(), requires_grad=trainable)
         # ρ weighs colour in the block distance, which picks the matches: a discrete choice with no gradient, so
@@ -218,8 +222,8 @@ class DepthRestorer(nn.Module):
         b, _, h, w = y.shape
         guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
         factor = _infer_factor(y, guide, scale_factor)
-        K = degradation_operator(self.upsampling.degradation, factor)  # the task, handed to every stage
-        bs = self.block_matching.block_size
+        K = degradation_operator(self.degradation, factor)  # the task, handed to every stage
+        bs = self.block_matcher.settings.block_size
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
                              f"{bs}x{bs}, the block size used by block matching.")
@@ -244,7 +248,7 @@ class DepthRestorer(nn.Module):
         if timed:
             if state.x.device.type == "cuda":
                 torch.cuda.synchronize(state.x.device)
-            state.timings["total"] = time.perf_counter() - t0
+            ctx.log.timings["total"] = time.perf_counter() - t0
         x = state.x
         if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
             band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
@@ -254,34 +258,35 @@ class DepthRestorer(nn.Module):
             x = _leave_unconfident_missing(x, ctx, observed)
         info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
                 "implausible_pixels": glitches.flatten(1).sum(1).tolist(),
-                "cg_iterations": [int(n.max()) for n in state.cg_iterations], "factor": factor,
-                "seconds": dict(state.timings or {})}
+                "cg_iterations": [int(n.max()) for n in ctx.log.cg_iterations], "factor": factor,
+                "seconds": dict(ctx.log.timings or {})}
         return RestorationResult(x, state.confidence * observed, state.q, state.e * s4, info)
 
-    def _initial_state(self, yn, observed, guide, K: Degradation, noise=None, grid_step=None, timings=None):
-        terms, init = self.terms, self.initial
+    def _initial_state(self, yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
+                       noise: Optional[torch.Tensor] = None, grid_step: Optional[torch.Tensor] = None,
+                       timings: Optional[dict] = None) -> tuple[RestorationState, RestorationContext]:
+        """The context of this forward (its run log times the stages when ``timings`` is a dict) and the state
+        before the first layer: x⁰, Q⁰ and the first matches and α."""
+        terms = self.terms
         ctx = RestorationContext(y=yn, observed=observed, rgb=guide, K=K,
                                  temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp(),
-                                 grid_step=grid_step)
+                                 grid_step=grid_step, log=RunLog(timings=timings))
         # colour-guided estimate on the observation grid, every pixel; holes at depth gaps filled from one side
-        guided, ctx.fill_confident, _ = initial_estimate(yn, observed, guide, K.scale, init, return_fill=True)
-        keep = init.keep_observed and guided is not None
-        x0 = torch.where(observed > 0, yn, guided) if keep else guided
+        guided, ctx.fill_confident = self.initializer.guided(yn, observed, guide, K)
+        x0 = self.initializer.observation_grid(yn, observed, guided)
         b = yn.shape[0]
         matches, q, conf = None, observed, observed
         # the singular test compares the estimate with the observation pixel by pixel: K = I only
-        detect_first = terms.use_singular and K.is_identity and init.singular and guide is not None
+        detect_first = terms.use_singular and K.is_identity and self.initializer.detects_singular and guide is not None
         if detect_first:
             # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
             # those of the raw input; singular pixels start from the guided value instead of y.
-            with stage(timings, "block_matching", yn.device):
-                matches = run_block_matching(guided, ctx, observed, self.block_matching)
-            with stage(timings, "singular", yn.device):
-                q, conf = singular_test(ctx, guided, matches, self.singular)
-            x0 = torch.where(q > 0, yn, guided)
+            matches = self.block_matcher(guided, ctx, observed)
+            q, conf = self.singular_detector(ctx, guided, matches)
+            x0 = self.initializer.observation_grid(yn, observed, guided, trusted=q)
             matches = None  # match again on x⁰ for the nonlocal term
         if not K.is_identity:  # x⁰ to the output grid
-            x0 = upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise, degradation=K)
+            x0 = self.initializer(x0, observed, guide, K, noise=noise)
         elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
             ctx.prior = guided
         if self.guidance is not None:  # colour features once per forward; each layer adds its state's
@@ -290,12 +295,11 @@ class DepthRestorer(nn.Module):
         zeros2 = x0.new_zeros(b, 2, hh, ww)
         alpha = zeros2
         if matches is None and (terms.use_nonlocal or (terms.use_singular and K.is_identity)):
-            with stage(timings, "block_matching", x0.device):
-                matches = run_block_matching(x0, ctx, observed, self.block_matching)
+            matches = self.block_matcher(x0, ctx, observed)
         if terms.use_nonlocal:
             alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
         state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=q,
-                                 confidence=conf, matches=matches, cg_iterations=[], timings=timings)
+                                 confidence=conf, matches=matches)
         return state, ctx
 
     # ---- parameters -------------------------------------------------------------------------
@@ -346,60 +350,6 @@ class DepthRestorer(nn.Module):
             raise DepthSRError(f"no pretrained parameters named {name!r}; available are {available} "
                              f"(folders of {root} holding config.json and state_dict.pt).")
         return cls.load(root / name, trainable=trainable, map_location=map_location)
-
-
-def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
-                     c: InitConfig | RestorerConfig, return_fill: bool = False
-                     ) -> Union[Optional[torch.Tensor], tuple[Optional[torch.Tensor], torch.Tensor, torch.Tensor]]:
-    """x⁰ on the observation grid: a colour-guided normalised convolution, or push-pull without colour.
-
-    ``c`` is the :class:`~torch_depth_sr.config.InitConfig` (or a whole :class:`RestorerConfig`, whose
-    ``initial`` group is used); ``factor`` is the ratio of the guide's grid to the depth's (the guide is
-    area-averaged to the depth's grid). ``c.fill``: ``"domain"`` — masked domain-transform filter
-    (:func:`~torch_depth_sr.guided_filters.domain_transform_filter`, ``dt_*``); ``"jbf"`` — masked joint
-    bilateral filter (:func:`~torch_depth_sr.guided_filters.joint_bilateral_filter`, ``kernel_size``,
-    ``sigma_*``); ``"pushpull"`` (or no guide) — :func:`~torch_depth_sr.fill.fill_holes`.
-    Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` (unless ``c.sided_fill`` is None:
-    ``config.extra["sided_fill"]`` False, or ``init_fill == "pushpull"``): a hole next to a depth gap takes the
-    values of one side. With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}:
-    ``confident`` = measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from
-    one side.
-    """
-    from .fill import fill_holes_sided
-    from .guided_filters import domain_transform_filter, joint_bilateral_filter
-
-    if isinstance(c, RestorerConfig):
-        c = c.initial
-    if guide is None or c.fill == "pushpull":
-        est = fill_holes(yn, observed)
-        g = None
-    else:
-        g = area_downsample(guide, factor)  # the guide on the depth's grid (a copy when factor = 1)
-        if c.fill == "domain":
-            est = domain_transform_filter(yn, g, observed, sigma_space=c.dt_sigma_space,
-                                          sigma_color=c.dt_sigma_color, iterations=c.dt_iterations)
-        elif c.fill == "jbf":
-            kernel = min(c.kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
-            kernel -= 1 - kernel % 2
-            est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.sigma_space,
-                                         sigma_color=c.sigma_color)
-        else:
-            raise ValueError(f"init_fill={c.fill!r}; allowed are 'domain', 'jbf' and 'pushpull'.")
-    confident = torch.ones_like(observed)
-    one_side = torch.zeros_like(observed)
-    if c.sided_fill is not None and not bool((observed > 0).all()):
-        ambiguous = c.sided_fill.ambiguous
-        kernel = max(3, min(c.kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
-        with torch.no_grad():
-            r = fill_holes_sided(yn.detach(), observed, g, kernel_size=kernel, sigma_space=c.sigma_space,
-                                 sigma_color=c.sigma_color, **c.sided_fill.fill_arguments())
-        # ambiguous="mix": a hole whose side is not clear keeps the weighted mean of both (marked unconfident)
-        take = (r.confident > 0) | (ambiguous != "mix") | (g is None)
-        hole = observed <= 0
-        est = torch.where(hole & take, r.depth.to(est.dtype), est)
-        confident = torch.where(hole, r.confident, confident)
-        one_side = (hole & take & (r.gap > 0)).to(observed.dtype)
-    return (est, confident, one_side) if return_fill else est
 
 
 FILL_MODES = ("all", "trusted")

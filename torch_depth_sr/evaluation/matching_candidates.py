@@ -19,7 +19,7 @@ from typing import Optional, Sequence
 
 import torch
 
-from .. import layers
+from .. import stages
 from ..block_matching import BlockMatches, block_match, refine_matches
 from ..model import DepthRestorer
 from .report import print_table
@@ -47,7 +47,7 @@ def recall(found: BlockMatches, exact: BlockMatches) -> float:
 @contextmanager
 def _recording(calls: list):
     """Record the inputs of every block-matching pass of the model."""
-    original = layers.run_block_matching
+    original = stages.run_block_matching  # what BlockMatcher calls
 
     def record(x, ctx, q, settings, previous=None):
         m = original(x, ctx, q, settings, previous)
@@ -55,11 +55,11 @@ def _recording(calls: list):
                           rgb=ctx.rgb, previous=previous, exact=m, ctx=ctx))
         return m
 
-    layers.run_block_matching = record
+    stages.run_block_matching = record
     try:
         yield
     finally:
-        layers.run_block_matching = original
+        stages.run_block_matching = original
 
 
 def _run(spec: dict, call: dict, kw: dict) -> BlockMatches:

@@ -126,7 +126,8 @@ def _stage_runner(method: str):
     """One stage of the model alone, on normalised inputs as the model builds them (default config)."""
     from ..block_matching import block_match, refine_matches
     from ..fill import fill_holes
-    from ..model import DepthRestorer, initial_estimate
+    from ..initial import initial_estimate
+    from ..model import DepthRestorer
 
     model = DepthRestorer()
     c = model.config
