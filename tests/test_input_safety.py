@@ -320,3 +320,15 @@ def test_transforms_accept_big_endian_and_read_only_depth():
     ref = AddGaussianNoise(1.0, seed=0)({"depth": d.astype(np.float32), "name": "a"})["depth"]
     np.testing.assert_array_equal(out, ref)
     assert out.dtype.kind == "f" and out.dtype.itemsize == 4
+
+
+def test_shape_errors_carry_the_actual_and_expected_shapes():
+    """Issue 10 item 4: one set of argument checks whose ShapeError says what arrived and what is allowed."""
+    import torch
+
+    from torch_depth_sr import DepthRestorer
+    from torch_depth_sr.errors import ShapeError
+
+    with pytest.raises(ShapeError) as info:
+        DepthRestorer(num_layers=1)(torch.rand(1, 2, 16, 16) + 1)
+    assert info.value.actual == (1, 2, 16, 16) and info.value.expected == "(B,1,H,W)"

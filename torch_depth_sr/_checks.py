@@ -17,13 +17,15 @@ def check_4d(x: torch.Tensor, name: str, channels: int | Sequence[int] | None = 
     if not isinstance(x, torch.Tensor):
         raise DTypeError(f"{name} must be a torch.Tensor of shape (B,C,H,W); got {type(x).__name__}.")
     if x.ndim != 4:
-        raise ShapeError(f"{name} must have shape (B,C,H,W); got {tuple(x.shape)} ({x.ndim} dims).")
+        raise ShapeError(f"{name} must have shape (B,C,H,W); got {tuple(x.shape)} ({x.ndim} dims).",
+                         actual=tuple(x.shape), expected="(B,C,H,W)")
     if channels is not None:
         allowed = (channels,) if isinstance(channels, int) else tuple(channels)
         if x.shape[1] not in allowed:
             raise ShapeError(
                 f"{name} must have {' or '.join(map(str, allowed))} channel(s) in dim 1 of (B,C,H,W); "
-                f"got shape {tuple(x.shape)}."
+                f"got shape {tuple(x.shape)}.",
+                actual=tuple(x.shape), expected=f"(B,{'|'.join(map(str, allowed))},H,W)",
             )
 
 
@@ -32,7 +34,8 @@ def check_same_hw(a: torch.Tensor, b: torch.Tensor, name_a: str, name_b: str) ->
     if a.shape[0] != b.shape[0] or a.shape[-2:] != b.shape[-2:]:
         raise ShapeError(
             f"{name_a} and {name_b} must share batch size and height/width; got {name_a} {tuple(a.shape)} "
-            f"and {name_b} {tuple(b.shape)}. Align or resize the colour image to the depth map first."
+            f"and {name_b} {tuple(b.shape)}. Align or resize the colour image to the depth map first.",
+            actual=tuple(b.shape), expected=f"batch {a.shape[0]} and {tuple(a.shape[-2:])} like {name_a}",
         )
 
 
@@ -46,7 +49,8 @@ def check_min_size(x: torch.Tensor, name: str, min_hw: int, why: str) -> None:
     """Raise ShapeError if ``x`` is smaller than ``min_hw`` in height or width."""
     h, w = x.shape[-2:]
     if h < min_hw or w < min_hw:
-        raise ShapeError(f"{name} is {h}x{w}; it must be at least {min_hw}x{min_hw} ({why}).")
+        raise ShapeError(f"{name} is {h}x{w}; it must be at least {min_hw}x{min_hw} ({why}).",
+                         actual=tuple(x.shape), expected=f"H, W >= {min_hw}")
 
 
 _SIGMA_ALLOWED = "None (estimate it), or a finite number > 0 in depth units, or one such number per sample"

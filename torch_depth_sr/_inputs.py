@@ -70,13 +70,15 @@ def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch
     elif ndim == 3:
         if t.shape[0] != 1:
             raise ShapeError(f"depth with 3 dims must be (1,H,W); got {tuple(t.shape)}. "
-                             "Use (B,1,H,W) for a batch.")
+                             "Use (B,1,H,W) for a batch.", actual=tuple(t.shape), expected="(1,H,W)")
         t = t[None]
     elif ndim == 4:
         if t.shape[1] != 1:
-            raise ShapeError(f"depth must have one channel, (B,1,H,W); got {tuple(t.shape)}.")
+            raise ShapeError(f"depth must have one channel, (B,1,H,W); got {tuple(t.shape)}.",
+                             actual=tuple(t.shape), expected="(B,1,H,W)")
     else:
-        raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.")
+        raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.",
+                         actual=tuple(t.shape), expected="(H,W), (1,H,W) or (B,1,H,W)")
     if t.shape[0] == 0 or t.shape[-1] == 0 or t.shape[-2] == 0:
         raise ShapeError(f"depth is empty: shape {tuple(t.shape)}.")
     y = t.to(compute_dtype)
@@ -109,7 +111,8 @@ def _parse_mask(mask: Any, shape: torch.Size, depth_shape: tuple) -> torch.Tenso
         raise DTypeError(f"mask has dtype {m.dtype}; complex masks are not allowed: use bool, integer or float "
                          "(values > 0 mean measured).")
     if m.shape[-2:] != shape[-2:] or m.numel() != shape.numel():
-        raise ShapeError(f"mask must have the same shape as depth; got mask {tuple(m.shape)} and depth {depth_shape}.")
+        raise ShapeError(f"mask must have the same shape as depth; got mask {tuple(m.shape)} and depth {depth_shape}.",
+                         actual=tuple(m.shape), expected=f"{tuple(depth_shape)}, depth's shape")
     return m.reshape(shape) > 0
 
 
@@ -136,7 +139,8 @@ def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) ->
     elif t.ndim == 3:
         t = t[None]
     if t.ndim != 4 or t.shape[1] not in (1, 3):
-        raise ShapeError(f"rgb must be (B,3,H,W), (3,H,W), H×W×3 (numpy) or greyscale; got {tuple(rgb.shape)}.")
+        raise ShapeError(f"rgb must be (B,3,H,W), (3,H,W), H×W×3 (numpy) or greyscale; got {tuple(rgb.shape)}.",
+                         actual=tuple(rgb.shape), expected="(B,3,H,W), (3,H,W), H×W×3 or greyscale")
     t = t.to(device=device, dtype=dtype)
     _check_rgb_range(t.detach(), is_int, full_scale, rgb.dtype)  # detached: the checks read values only
     if is_int:

@@ -4,7 +4,7 @@ Every error says what arrived, what is allowed and, where there is one, the fix.
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Optional
 
 
 class DepthSRError(ValueError):
@@ -12,7 +12,16 @@ class DepthSRError(ValueError):
 
 
 class ShapeError(DepthSRError):
-    """A tensor or array has a shape the function cannot accept."""
+    """A tensor or array has a shape the function cannot accept.
+
+    Attributes:
+        actual: the shape that arrived (a tuple), when the raiser knew it.
+        expected: what is allowed, as text (e.g. ``"(B,1,H,W)"``), when the raiser stated it.
+    """
+
+    def __init__(self, message: str, actual: Optional[tuple] = None, expected: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.actual, self.expected = actual, expected
 
 
 class DTypeError(DepthSRError, TypeError):

@@ -382,7 +382,7 @@ def _check_model_input(depth: Any, rgb: Any, mask: Any) -> None:
         if t.ndim != 4:
             raise ShapeError(f"{name} has shape {tuple(t.shape)}; DepthRestorer takes (B,C,H,W) tensors. Add the "
                              "batch/channel dims (depth[None, None]) or use torch_depth_sr.restore_depth, which "
-                             "takes (H,W) and (1,H,W) as well.")
+                             "takes (H,W) and (1,H,W) as well.", actual=tuple(t.shape), expected="(B,C,H,W)")
         if name != "mask" and not t.is_floating_point():
             raise DTypeError(f"{name} has dtype {t.dtype}; DepthRestorer takes float tensors (rgb in [0,1]). Use "
                              "torch_depth_sr.restore_depth(depth, rgb, model=model) for integer depth or colour "

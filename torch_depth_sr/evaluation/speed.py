@@ -41,6 +41,8 @@ from typing import Optional
 
 import torch
 
+from ..errors import UsageError
+
 __all__ = [
     "METHODS",
     "SIZES",
@@ -302,7 +304,7 @@ def run_speed(args: argparse.Namespace) -> int:
         methods.append("kornia-jbf9")  # the reference of every ratio
     for m in methods:
         if m not in METHODS:
-            raise SystemExit(f"unknown speed method {m!r}; allowed are {list(METHODS)}.")
+            raise UsageError(f"unknown speed method {m!r}; allowed are {list(METHODS)}.")
     results, skipped = [], []
     if "dataloader" in methods:
         methods.remove("dataloader")
