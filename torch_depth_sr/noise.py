@@ -30,18 +30,30 @@ __all__ = ["estimate_noise_sigma", "quantisation_step", "implausible", "depth_sc
 _MAD_TO_STD = 1.4826
 
 
-def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, method: str = "second_differences"
+                         ) -> torch.Tensor:
     """Estimate the per-sample noise std of ``depth (B,1,H,W)`` on ``observed`` pixels.
 
-    Returns ``(B,)`` in the units of ``depth``. Samples with too few measured triplets
-    (fewer than 16) or a perfectly smooth surface get 0; callers floor it (see :func:`depth_scale`).
+    ``method="second_differences"`` (the model's): MAD of the horizontal and vertical second differences of
+    measured triplets (planes give 0). ``"haar"`` (the dictionary baseline's, Donoho & Johnstone 1994):
+    median |HH| / 0.6745 of the Haar diagonal detail ``(x00 − x01 − x10 + x11)/2`` over non-overlapping 2×2
+    blocks whose four pixels are measured.
+
+    Returns ``(B,)`` in the units of ``depth``. Samples with too few measured triplets (fewer than 16; for
+    ``"haar"`` no complete block) or a perfectly smooth surface get 0; callers floor it (see :func:`depth_scale`).
 
     Examples:
         >>> g = torch.Generator().manual_seed(0)
         >>> y = 100 + 5 * torch.randn(1, 1, 200, 200, generator=g)
         >>> round(float(estimate_noise_sigma(y, torch.ones_like(y))), 1)
         5.0
+        >>> round(float(estimate_noise_sigma(y, torch.ones_like(y), method="haar")))
+        5
     """
+    if method == "haar":
+        return _haar_sigma(depth, observed)
+    if method != "second_differences":
+        raise ValueError(f"method must be 'second_differences' or 'haar'; got {method!r}.")
     b = depth.shape[0]
     out = depth.new_zeros(b)
     d = depth.detach()
@@ -55,6 +67,20 @@ def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor) -> torch.T
         if vals.numel() >= 16:
             out[i] = _MAD_TO_STD * vals.median() / 6**0.5
     return out
+
+
+def _haar_sigma(depth: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    m = (observed > 0).to(depth.dtype)
+    h2, w2 = depth.shape[-2] // 2 * 2, depth.shape[-1] // 2 * 2
+    x = torch.where(m > 0, depth, torch.zeros_like(depth))[..., :h2, :w2]
+    mm = m[..., :h2, :w2]
+    hh = 0.5 * (x[..., 0::2, 0::2] - x[..., 0::2, 1::2] - x[..., 1::2, 0::2] + x[..., 1::2, 1::2])
+    ok = mm[..., 0::2, 0::2] * mm[..., 0::2, 1::2] * mm[..., 1::2, 0::2] * mm[..., 1::2, 1::2]
+    out = []
+    for b in range(depth.shape[0]):
+        v = hh[b][ok[b] > 0].abs()
+        out.append(v.median() / 0.6745 if v.numel() else depth.new_zeros(()))
+    return torch.stack(out) if out else depth.new_zeros(0)
 
 
 def quantisation_step(depth: torch.Tensor, observed: torch.Tensor, integer_input: bool = False) -> torch.Tensor:

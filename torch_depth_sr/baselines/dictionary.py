@@ -17,6 +17,7 @@ from torch import nn
 
 from .._checks import check_4d
 from ..errors import DepthSRError, ShapeError
+from ..noise import estimate_noise_sigma as _estimate_noise_sigma
 from .jbf import _check_depth, _check_rgb, _pull_push_fill, _resolve_mask
 
 __all__ = [
@@ -203,7 +204,8 @@ def overcomplete_dct_dictionary(patch_size: int, n_atoms: int, dtype: torch.dtyp
 
 
 def estimate_noise_sigma(depth: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-    r"""Robust per-sample estimate of i.i.d. noise sigma from the Haar diagonal detail.
+    r"""Robust per-sample estimate of i.i.d. noise sigma from the Haar diagonal detail (the library's one
+    estimator, :func:`torch_depth_sr.noise.estimate_noise_sigma` with ``method="haar"``).
 
     Donoho & Johnstone 1994: :math:`\hat\sigma = \mathrm{median}|HH| / 0.6745` with
     :math:`HH = (x_{00} - x_{01} - x_{10} + x_{11})/2` over non-overlapping 2x2 blocks whose four
@@ -223,17 +225,7 @@ def estimate_noise_sigma(depth: torch.Tensor, mask: torch.Tensor | None = None) 
         5
     """
     _check_depth(depth)
-    m = _resolve_mask(depth, mask)
-    h2, w2 = depth.shape[-2] // 2 * 2, depth.shape[-1] // 2 * 2
-    x = torch.where(m > 0, depth, torch.zeros_like(depth))[..., :h2, :w2]
-    mm = m[..., :h2, :w2]
-    hh = 0.5 * (x[..., 0::2, 0::2] - x[..., 0::2, 1::2] - x[..., 1::2, 0::2] + x[..., 1::2, 1::2])
-    ok = mm[..., 0::2, 0::2] * mm[..., 0::2, 1::2] * mm[..., 1::2, 0::2] * mm[..., 1::2, 1::2]
-    out = []
-    for b in range(depth.shape[0]):
-        v = hh[b][ok[b] > 0].abs()
-        out.append(v.median() / 0.6745 if v.numel() else depth.new_zeros(()))
-    return torch.stack(out) if out else depth.new_zeros(0)
+    return _estimate_noise_sigma(depth, _resolve_mask(depth, mask), method="haar")
 
 
 def _patch_starts(n: int, p: int, stride: int) -> list[int]:
