@@ -10,7 +10,8 @@ image and the current estimate per-pixel multipliers of the layer's thresholds:
     e &= Q \odot \operatorname{soft}\big(y-Kx,\ m^{\gamma}_k \odot \gamma_k\big)
 
 with :math:`m = \exp(c \tanh(r))`, :math:`r` the network's output for layer :math:`k` and :math:`c = \log R`,
-``R = RestorerConfig.guidance_range`` (default 4: every multiplier in [1/4, 4]). ``m^tv`` and ``m^nl`` have one channel per gradient direction (horizontal, vertical).
+``R = RestorerConfig.guidance_range`` (default 4: every multiplier in [1/4, 4]). ``m^tv`` and ``m^nl`` have one
+channel per gradient direction (horizontal, vertical).
 The multipliers act on elementwise quantities only, so the linear system of the x-update (and its CG) is the
 scalar model's. The last layer of every head is zero-initialised: the untrained network multiplies by exactly 1,
 and the model starts from the scalar one, bit for bit.
