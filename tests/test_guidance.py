@@ -42,6 +42,27 @@ class TestGuidanceNet:
         for m in maps:
             assert bool(((m >= lo * (1 - 1e-6)) & (m <= hi * (1 + 1e-6))).all())
 
+    @pytest.mark.parametrize("max_multiplier", [1.0, 8.0, 16.0])
+    def test_the_range_is_a_parameter(self, max_multiplier):
+        net = GuidanceNet(num_layers=1, channels=4, max_multiplier=max_multiplier)
+        assert net.max_log_multiplier == math.log(max_multiplier)
+        with torch.no_grad():
+            for p in net.parameters():
+                p.fill_(5.0)
+            net.heads[0].bias[:2] = -5.0  # the TV maps saturate low, the others high
+        x = torch.randn(1, 1, 16, 16)
+        maps = net.prepare(torch.rand(1, 3, 16, 16)).maps(0, x, torch.ones_like(x), torch.zeros_like(x))
+        lo, hi = 1 / max_multiplier, max_multiplier
+        for m in maps:
+            assert bool(((m >= lo * (1 - 1e-5)) & (m <= hi * (1 + 1e-5))).all())
+        assert math.isclose(float(maps.nonlocal_.detach().max()), hi, rel_tol=1e-4)
+        if max_multiplier == 1.0:  # no range: every map is exactly 1, whatever the weights
+            assert all(bool((m == 1).all()) for m in maps)
+
+    def test_default_range_is_the_former_constant(self):
+        assert GuidanceNet(num_layers=1).max_log_multiplier == MAX_LOG_MULTIPLIER == math.log(4.0)
+        assert RestorerConfig().guidance_range == 4.0
+
     def test_no_colour_guide_runs(self):
         net = GuidanceNet(num_layers=1, channels=4)
         x = torch.randn(1, 1, 12, 12)
@@ -52,6 +73,8 @@ class TestGuidanceNet:
     def test_exception(self):
         with pytest.raises(ValueError, match="num_layers"):
             GuidanceNet(num_layers=0)
+        with pytest.raises(ValueError, match="max_multiplier"):
+            GuidanceNet(num_layers=1, max_multiplier=0.5)
 
 
 class TestGuidedRestorer:
@@ -106,6 +129,24 @@ class TestGuidedRestorer:
         cfg.write_text(text)
         assert DepthRestorer.load(tmp_path / "old").guidance is None
 
+    def test_a_guided_model_saved_without_the_range_loads_with_4_and_the_same_output(self, scene, tmp_path):
+        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=4, **SMALL), seed=3, scale=1.0)
+        m.save(tmp_path / "old")
+        cfg = (tmp_path / "old" / "config.json")
+        cfg.write_text("\n".join(line for line in cfg.read_text().splitlines() if '"guidance_range"' not in line))
+        back = DepthRestorer.load(tmp_path / "old")
+        assert back.config.guidance_range == 4.0 and back.guidance.max_log_multiplier == math.log(4.0)
+        assert torch.equal(back(scene["depth"], scene["rgb"]), m(scene["depth"], scene["rgb"]))
+        wider = DepthRestorer(m.config.replace(guidance_range=8.0))  # the same weights, a wider range
+        wider.load_state_dict(m.state_dict())
+        assert not torch.equal(wider(scene["depth"], scene["rgb"]), m(scene["depth"], scene["rgb"]))
+
+    def test_range_is_saved(self, tmp_path):
+        m = DepthRestorer(guidance_net=True, guidance_channels=4, guidance_range=8.0, **SMALL)
+        m.save(tmp_path / "r8")
+        back = DepthRestorer.load(tmp_path / "r8")
+        assert back.config.guidance_range == 8.0 and back.guidance.max_log_multiplier == math.log(8.0)
+
     def test_config_fields_are_checked_and_belong_to_the_layer_group(self):
         c = RestorerConfig(guidance_net=True, guidance_channels=8)
         assert c.layer.guidance_net and c.layer.guidance_channels == 8
@@ -113,12 +154,18 @@ class TestGuidedRestorer:
             RestorerConfig(guidance_net=1)
         with pytest.raises(ParameterError, match="guidance_channels"):
             RestorerConfig(guidance_channels=0)
+        c = RestorerConfig(guidance_net=True, guidance_range=16.0)
+        assert c.layer.guidance_range == 16.0
+        for bad in (0.5, 0, -4.0, math.inf, math.nan, "8", True):
+            with pytest.raises(ParameterError, match="guidance_range"):
+                RestorerConfig(guidance_range=bad)
 
 
 class TestShippedAndBench:
     def test_shipped_guided_model_loads_with_its_network(self):
         m = DepthRestorer.from_pretrained("denoise-guided")
         assert m.config.guidance_net and m.guidance is not None
+        assert m.guidance.max_log_multiplier == math.log(m.config.guidance_range)
         assert not any(p.requires_grad for p in m.parameters())
         heads = torch.cat([p.flatten() for p in m.guidance.heads.parameters()])
         assert heads.abs().max() > 0  # trained: the maps are not all 1

@@ -73,11 +73,12 @@ class RestorerConfig:
     # instead of being left to the regularisers alone (an extension of the paper; 0 = the paper's model)
     guided_prior: float = 3.2
     prior_on_singular: bool = True  # β also on pixels the singular test rejects (else on missing pixels only)
-    # per-pixel multipliers (in [1/4, 4]) of each layer's thresholds λ/μ₁, η/μ₂ and γ, predicted by a small CNN
-    # from the colour image and the current estimate (torch_depth_sr.guidance; issue 14); off = the scalar model.
+    # per-pixel multipliers (in [1/R, R], R = guidance_range) of each layer's thresholds λ/μ₁, η/μ₂ and γ, predicted
+    # by a small CNN from the colour image and the current estimate (torch_depth_sr.guidance; issue 14); off = the scalar model.
     # Zero-initialised, so an untrained network changes nothing; trained with the other parameters.
     guidance_net: bool = False
     guidance_channels: int = 16  # feature channels of the guidance network
+    guidance_range: float = 4.0  # R: every multiplier of the guidance network lies in [1/R, R] (R = 1: all 1)
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 11
@@ -277,8 +278,8 @@ def _prefixed(prefix: str, *names: str) -> dict:
 class LayerConfig(_Group):
     """What one unrolled layer computes: initial λ, η, γ, μ₁, μ₂, the shrinkage, the terms switched on, the
     guided prior β (on untrusted pixels; on singular ones too with ``prior_on_singular``) and whether a guidance
-    network (:class:`~torch_depth_sr.guidance.GuidanceNet`, ``guidance_channels`` wide) makes the thresholds
-    per-pixel maps."""
+    network (:class:`~torch_depth_sr.guidance.GuidanceNet`, ``guidance_channels`` wide, multipliers in
+    [1/``guidance_range``, ``guidance_range``]) makes the thresholds per-pixel maps."""
 
     lam: float
     eta: float
@@ -294,9 +295,10 @@ class LayerConfig(_Group):
     prior_on_singular: bool
     guidance_net: bool
     guidance_channels: int
+    guidance_range: float
     _FLAT: ClassVar[dict] = _same("lam", "eta", "eta_clean", "gamma", "mu1", "mu2", "isotropic", "use_nonlocal",
                                   "use_outliers", "use_singular", "guided_prior", "prior_on_singular",
-                                  "guidance_net", "guidance_channels")
+                                  "guidance_net", "guidance_channels", "guidance_range")
 
 
 @dataclass(frozen=True)
@@ -652,6 +654,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "init_fill": _choice("domain", "jbf", "pushpull"),
     "guided_prior": _real(0.0, lo_open=False),
     "prior_on_singular": _bool, "init_singular": _bool, "guidance_net": _bool, "guidance_channels": _int(1), "init_keep_observed": _bool,
+    "guidance_range": _real(1.0, lo_open=False),
     "init_kernel_size": _int(1),
     "init_sigma_space": _positive, "init_sigma_color": _positive,
     "init_dt_sigma_space": _positive, "init_dt_sigma_color": _positive, "init_dt_iterations": _int(1),

@@ -9,8 +9,9 @@ image and the current estimate per-pixel multipliers of the layer's thresholds:
     w &= \operatorname{soft}\big(Dx-\alpha,\ m^{\mathrm{nl}}_k \odot \eta_k/\mu_{2,k}\big) \\
     e &= Q \odot \operatorname{soft}\big(y-Kx,\ m^{\gamma}_k \odot \gamma_k\big)
 
-with :math:`m = \exp(c \tanh(r))`, :math:`r` the network's output for layer :math:`k` and :math:`c = \log 4` (every
-multiplier in [1/4, 4]). ``m^tv`` and ``m^nl`` have one channel per gradient direction (horizontal, vertical).
+with :math:`m = \exp(c \tanh(r))`, :math:`r` the network's output for layer :math:`k` and :math:`c = \log R`,
+``R = RestorerConfig.guidance_range`` (default 4: every multiplier in [1/4, 4]). ``m^tv`` and ``m^nl`` have one
+channel per gradient direction (horizontal, vertical).
 The multipliers act on elementwise quantities only, so the linear system of the x-update (and its CG) is the
 scalar model's. The last layer of every head is zero-initialised: the untrained network multiplies by exactly 1,
 and the model starts from the scalar one, bit for bit.
@@ -39,7 +40,8 @@ STATE_FEATURES = 5
 """Channels of the per-layer state features (see :meth:`GuidanceNet.state_features`)."""
 
 MAX_LOG_MULTIPLIER = math.log(4.0)
-"""Every multiplier lies in ``[exp(-c), exp(c)]`` with this ``c``: [1/4, 4]."""
+"""The default ``c``: every multiplier lies in ``[exp(-c), exp(c)]`` = [1/4, 4] (``RestorerConfig.guidance_range``
+sets ``exp(c)``)."""
 
 
 class GuidanceMaps(NamedTuple):
@@ -60,6 +62,7 @@ class GuidanceNet(nn.Module):
     Args:
         num_layers: number of unrolled layers (one output head each).
         channels: feature channels of the convolutions.
+        max_multiplier: ``R``, every multiplier lies in ``[1/R, R]`` (``RestorerConfig.guidance_range``).
 
     Examples:
         >>> net = GuidanceNet(num_layers=2, channels=8)
@@ -73,10 +76,13 @@ class GuidanceNet(nn.Module):
 
     outputs = 5  # tv (2 directions), nonlocal (2 directions), outlier
 
-    def __init__(self, num_layers: int, channels: int = 16):
+    def __init__(self, num_layers: int, channels: int = 16, max_multiplier: float = 4.0):
         super().__init__()
         if num_layers < 1 or channels < 1:
             raise ValueError(f"GuidanceNet needs num_layers >= 1 and channels >= 1; got {num_layers}, {channels}.")
+        if not (math.isfinite(max_multiplier) and max_multiplier >= 1):
+            raise ValueError(f"GuidanceNet needs a finite max_multiplier >= 1; got {max_multiplier}.")
+        self.max_log_multiplier = math.log(max_multiplier)  # c: log-multipliers are c·tanh(r)
         c = channels
         self.guide = nn.Sequential(_conv(3, c, 3), nn.ReLU(), _conv(c, c, 3), nn.ReLU())
         self.state = _conv(STATE_FEATURES, c, 3)
@@ -124,7 +130,8 @@ class GuidanceNet(nn.Module):
         return PreparedGuidance(self, self.encode_guide(rgb, like))
 
     def extra_repr(self) -> str:
-        return f"layers={len(self.heads)}, parameters={sum(p.numel() for p in self.parameters())}"
+        return (f"layers={len(self.heads)}, parameters={sum(p.numel() for p in self.parameters())}, "
+                f"range=[1/{math.exp(self.max_log_multiplier):g}, {math.exp(self.max_log_multiplier):g}]")
 
 
 class PreparedGuidance:
@@ -137,7 +144,7 @@ class PreparedGuidance:
         """Layer ``index``'s :class:`GuidanceMaps` for the estimate ``x (B,1,H,W)``, the trusted set ``q`` and the
         residual on measured pixels ``(B,1,h,w)``; the outlier map is averaged (in the log) to the ``(h,w)`` grid."""
         feats = self.net.state_features(x, q, residual)
-        log_m = MAX_LOG_MULTIPLIER * torch.tanh(self.net.raw(index, self.guide_features, feats))  # (B,5,H,W)
+        log_m = self.net.max_log_multiplier * torch.tanh(self.net.raw(index, self.guide_features, feats))  # (B,5,H,W)
         log_m = log_m.to(x.dtype)
         log_gamma = log_m[:, 4:5]
         s = x.shape[-1] // q.shape[-1]

@@ -119,7 +119,8 @@ class DepthRestorer(nn.Module):
         # per-pixel multipliers of the layers' thresholds (issue 14); None = the scalar model (no state-dict keys)
         self.guidance: Optional[GuidanceNet] = None
         if config.guidance_net:
-            self.guidance = GuidanceNet(config.num_layers, config.guidance_channels).requires_grad_(trainable)
+            self.guidance = GuidanceNet(config.num_layers, config.guidance_channels,
+                                        config.guidance_range).requires_grad_(trainable)
 
     @classmethod
     def ablation(cls, name: str, **overrides) -> "DepthRestorer":

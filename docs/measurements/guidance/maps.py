@@ -4,8 +4,9 @@
         --out docs/measurements/guidance/lambda-Art.png
 
 Writes a PNG mosaic (colour, input, output; the TV-threshold multiplier per direction and the nonlocal and outlier
-multipliers of the first and the last layer, log scale from 1/4 (blue) to 4 (red), 1 = white) and prints the
-percentiles of each log2-multiplier per layer as JSON.
+multipliers of the first and the last layer, log scale from 1/R (blue) to R (red), 1 = white, R the model's
+``guidance_range``, 4 unless set) and prints the percentiles of each log2-multiplier per layer and the share of
+pixels within 5 % (in the log) of the cap as JSON.
 """
 from __future__ import annotations
 
@@ -19,12 +20,11 @@ import torch
 
 from torch_depth_sr import DepthRestorer
 from torch_depth_sr.figures import depth_to_bgr, mosaic, rgb_to_bgr, write_png
-from torch_depth_sr.guidance import MAX_LOG_MULTIPLIER
 
 
-def _log_map_to_bgr(log_m: np.ndarray) -> np.ndarray:
-    """log multiplier in [-c, c] -> blue (1/4) .. white (1) .. red (4)."""
-    t = np.clip(log_m / MAX_LOG_MULTIPLIER, -1, 1)
+def _log_map_to_bgr(log_m: np.ndarray, c: float) -> np.ndarray:
+    """log multiplier in [-c, c] -> blue (1/R) .. white (1) .. red (R), R = exp(c)."""
+    t = np.clip(log_m / c, -1, 1)
     r = np.where(t > 0, 1.0, 1.0 + t)
     b = np.where(t < 0, 1.0, 1.0 - t)
     g = 1.0 - np.abs(t)
@@ -55,10 +55,13 @@ def main() -> None:
         out = model(y, rgb)
     for h in hooks:
         h.remove()
-    logs = {k: MAX_LOG_MULTIPLIER * torch.tanh(r)[0].numpy() for k, r in raw.items()}  # (5,H,W) per layer
+    c = model.guidance.max_log_multiplier
+    logs = {k: c * torch.tanh(r)[0].numpy() for k, r in raw.items()}  # (5,H,W) per layer
     names = ["tv_h", "tv_v", "nl_h", "nl_v", "gamma"]
     stats = {f"layer{k}": {n: [round(float(v), 3) for v in np.percentile(l[i] / math.log(2), [5, 50, 95])]
                            for i, n in enumerate(names)} for k, l in logs.items()}
+    at_cap = {f"layer{k}": {n: round(float((np.abs(l[i]) > 0.95 * c).mean()), 3) for i, n in enumerate(names)}
+              for k, l in logs.items()}
     gt = sample["gt"][0]
     v = gt[gt > 0]
     lo, hi = float(v.quantile(0.005)), float(v.quantile(0.995))
@@ -66,11 +69,12 @@ def main() -> None:
     rows, labels = [top], [["colour", "input", "output"]]
     for k in (0, len(logs) - 1):
         l = logs[k]
-        rows.append([_log_map_to_bgr(l[0]), _log_map_to_bgr(l[1]), _log_map_to_bgr(0.5 * (l[2] + l[3]))])
+        rows.append([_log_map_to_bgr(l[0], c), _log_map_to_bgr(l[1], c), _log_map_to_bgr(0.5 * (l[2] + l[3]), c)])
         labels.append([f"layer {k}: lambda x, horiz.", f"layer {k}: lambda x, vert.", f"layer {k}: eta x (mean)"])
     write_png(a.out, mosaic(rows, labels, max_width=360))
     print(json.dumps({"scene": rec.name, "track": a.track, "model": a.model,
-                      "log2_multiplier_p5_p50_p95": stats}, indent=1))
+                      "guidance_range": math.exp(c), "log2_multiplier_p5_p50_p95": stats,
+                      "share_at_cap": at_cap}, indent=1))
 
 
 if __name__ == "__main__":
