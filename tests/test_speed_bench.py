@@ -52,7 +52,10 @@ def test_run_speed_subprocess_one_method(tmp_path):
 
 
 def test_unknown_method():
-    with pytest.raises(SystemExit, match="unknown speed method"):
+    from torch_depth_sr.errors import UsageError
+
+    # a library function raises a usage error (the CLI turns it into one line and exit status 2), not SystemExit
+    with pytest.raises(UsageError, match="unknown speed method"):
         run_speed(types.SimpleNamespace(json=None, device="cpu", sizes="24x32", batches="1", methods=["nope"]))
 
 
