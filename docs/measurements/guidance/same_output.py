@@ -4,7 +4,8 @@
     PYTHONPATH=/tmp/wt-g2 python docs/measurements/guidance/same_output.py denoise-guided /tmp/after.pt
     python docs/measurements/guidance/same_output.py --compare /tmp/before.pt /tmp/after.pt
 
-Restores the first four validation crops (96×96, σ = 5) of each track with the shipped model ``NAME`` and saves
+Restores the first four validation crops (96×96, σ = 5) of each track with the shipped model ``NAME`` (or a saved
+model folder, any argument with a ``/``) and saves
 the outputs; ``--compare`` prints, per track, whether the two files are equal and the max abs difference.
 """
 from __future__ import annotations
@@ -32,7 +33,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     _, val_sets = make_datasets(cfg.data, crop=cfg.crop, train_length=4, val_length=4, val_scenes=cfg.val_scenes,
                                 synthetic=cfg.synthetic, sigma=cfg.sigma, val_sigma=cfg.val_sigma, scale_factor=1,
                                 degradation=cfg.degradation, seed=cfg.seed, use_middlebury=cfg.use_middlebury)
-    model = DepthRestorer.from_pretrained(args[0])
+    model = DepthRestorer.load(args[0]) if "/" in args[0] else DepthRestorer.from_pretrained(args[0])
     outs = {}
     with torch.no_grad():
         for k, ds in val_sets.items():
