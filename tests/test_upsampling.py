@@ -55,12 +55,16 @@ def _edge_scene(depth_edge: int, colour_edge: int, size=(64, 64), s=4):
     return gt, lr, rgb
 
 
+def _x0(lr, rgb, **overrides):
+    """x⁰ ×4 of a nearly clean input (σ = 0.05) under the default config with ``overrides``."""
+    noise = torch.tensor([0.05], dtype=torch.float64)
+    return upsample_initial(lr, torch.ones_like(lr), rgb, 4, RestorerConfig(**overrides).upsampling, noise=noise)
+
+
 def test_the_edge_band_sharpens_a_depth_edge_the_colour_confirms():
     gt, lr, rgb = _edge_scene(30, 30)
-    c = RestorerConfig().upsampling
-    noise = torch.tensor([0.05], dtype=torch.float64)
-    x0 = upsample_initial(lr, torch.ones_like(lr), rgb, 4, c, noise=noise)
-    no_edge_band = upsample_initial(lr, torch.ones_like(lr), rgb, 4, RestorerConfig(upsample_init_edge_band=0.0).upsampling, noise=noise)
+    x0 = _x0(lr, rgb)
+    no_edge_band = _x0(lr, rgb, upsample_init_edge_band=0.0)
     err = lambda v: float((v - gt).abs().mean())  # noqa: E731
     assert err(x0) < 0.7 * err(no_edge_band)
 
@@ -69,10 +73,8 @@ def test_a_colour_edge_the_data_do_not_confirm_does_not_move_the_depth_edge():
     # the colour edge is 8 fine pixels (2 input pixels) right of the depth edge: the JBU would drag the
     # step there; degraded again, that no longer matches the input, so the edge band is refused
     gt, lr, rgb = _edge_scene(28, 36)
-    c = RestorerConfig().upsampling
-    noise = torch.tensor([0.05], dtype=torch.float64)
-    checked = upsample_initial(lr, torch.ones_like(lr), rgb, 4, c, noise=noise)
-    unchecked = upsample_initial(lr, torch.ones_like(lr), rgb, 4, RestorerConfig(upsample_init_consistency=0.0).upsampling, noise=noise)
+    checked = _x0(lr, rgb)
+    unchecked = _x0(lr, rgb, upsample_init_consistency=0.0)
     bicubic = F.interpolate(lr, scale_factor=4, mode="bicubic", align_corners=False)
     err = lambda v: float((v - gt).square().mean().sqrt())  # noqa: E731
     assert err(unchecked) > err(bicubic)  # the unchecked filter does harm here ...

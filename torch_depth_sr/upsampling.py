@@ -23,15 +23,16 @@ import torch.nn.functional as F
 
 from .config import RestorerConfig, UpsamplingConfig
 from .guided_filters import joint_bilateral_upsample
-from .operators import Degradation
+from .operators import Degradation, degradation_operator
 
 __all__ = ["plane_residual", "upsample_initial"]
 
 
 def plane_residual(depth: torch.Tensor, size: int = 3) -> torch.Tensor:
     """The largest deviation of each ``size × size`` window of ``depth (B,1,h,w)`` from its least-squares
-    plane, per pixel (a border pixel takes its nearest whole window's): 0 on planes, a third of the step beside a depth edge, the noise level
-    (a few σ) on noisy flat ground. Curved surfaces give a little (their second differences).
+    plane, per pixel (a border pixel takes its nearest whole window's): 0 on planes, a third of the step beside a
+    depth edge, the noise level (a few σ) on noisy flat ground. Curved surfaces give a little (their second
+    differences).
 
     Examples:
         >>> yy, xx = torch.meshgrid(torch.arange(6.0), torch.arange(7.0), indexing="ij")
@@ -68,8 +69,8 @@ def upsample_initial(x0_lr: torch.Tensor, observed: torch.Tensor, guide: Optiona
     within ``c.init_band · noise + c.init_edge_band · E`` of bicubic interpolation, where ``noise (B,)`` is the
     noise σ in the units of ``x0_lr`` and ``E`` the :func:`plane_residual` of ``x0_lr``, its 3×3 maximum, on the
     fine grid. The edge band is refused on the low-resolution pixels where ``K(jbu)`` is further from ``x0_lr``
-    than ``K(bicubic)`` is by more than ``c.init_consistency · noise`` (``K``: ``degradation``, default area
-    averaging by ``factor``). Both bands 0 (or no ``noise`` with ``init_edge_band`` 0): the unbounded filter.
+    than ``K(bicubic)`` is by more than ``c.init_consistency · noise`` (``K``: ``degradation``, default the
+    config's own, by ``factor``). Both bands 0 (or no ``noise`` with ``init_edge_band`` 0): the unbounded filter.
     """
     if isinstance(c, RestorerConfig):
         c = c.upsampling
@@ -79,18 +80,23 @@ def upsample_initial(x0_lr: torch.Tensor, observed: torch.Tensor, guide: Optiona
     jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), radius=c.jbu.radius,
                                    sigma_space=c.jbu.sigma_space, sigma_color=c.jbu.sigma_color,
                                    first_order=c.jbu.first_order)
-    noise_band = c.init_band * noise.to(jbu).view(-1, 1, 1, 1) if noise is not None and c.init_band > 0 else None
-    if c.init_edge_band > 0:
-        evidence = F.max_pool2d(plane_residual(x0_lr), 3, stride=1, padding=1)
-        if noise is not None and c.init_consistency > 0:
-            down = degradation if degradation is not None else (lambda v: F.avg_pool2d(v, factor))
-            tolerance = c.init_consistency * noise.to(jbu).view(-1, 1, 1, 1)
-            moved = (down(jbu) - x0_lr).abs() > (down(bicubic) - x0_lr).abs() + tolerance
-            evidence = torch.where(moved, torch.zeros_like(evidence), evidence)
-        band = c.init_edge_band * F.interpolate(evidence, scale_factor=factor, mode="nearest")
-        band = band if noise_band is None else band + noise_band
-    elif noise_band is not None:
-        band = noise_band
-    else:
+    sigma = None if noise is None else noise.to(jbu).view(-1, 1, 1, 1)
+    use_noise_band = sigma is not None and c.init_band > 0
+    if not use_noise_band and c.init_edge_band <= 0:
         return jbu
+    band = c.init_band * sigma if use_noise_band else torch.zeros_like(jbu)
+    if c.init_edge_band > 0:
+        K = degradation if degradation is not None else degradation_operator(c.degradation, factor)
+        band = band + c.init_edge_band * _edge_evidence(x0_lr, jbu, bicubic, K, factor, c.init_consistency, sigma)
     return bicubic + torch.maximum(torch.minimum(jbu - bicubic, band), -band)
+
+
+def _edge_evidence(x0_lr: torch.Tensor, jbu: torch.Tensor, bicubic: torch.Tensor, K: Degradation, factor: int,
+                   consistency: float, sigma: Optional[torch.Tensor]) -> torch.Tensor:
+    """The 3×3 maximum of :func:`plane_residual` on the fine grid, 0 where ``K(jbu)`` leaves the input by more than
+    ``K(bicubic)`` does plus ``consistency · sigma`` (no check without ``sigma`` or with ``consistency`` 0)."""
+    evidence = F.max_pool2d(plane_residual(x0_lr), 3, stride=1, padding=1)
+    if sigma is not None and consistency > 0:
+        moved = (K(jbu) - x0_lr).abs() > (K(bicubic) - x0_lr).abs() + consistency * sigma
+        evidence = torch.where(moved, torch.zeros_like(evidence), evidence)
+    return F.interpolate(evidence, scale_factor=factor, mode="nearest")
