@@ -30,7 +30,8 @@ def main() -> None:
     for i, values in enumerate(model.layer_parameters()):
         print(f"layer {i}: " + ", ".join(f"{k}={v:.3f}" for k, v in values.items()))
     restorer = DepthRestorer.load(f"{a.out}/best")  # frozen, ready for inference
-    print("temperature", float(restorer.log_temperature.exp()), "colour weight", float(restorer.log_color_weight.exp()))
+    matcher = restorer.block_matcher
+    print("temperature", float(matcher.temperature), "colour weight", float(matcher.color_weight))
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ def test_layer_gradcheck(implicit):
     # μ, so the gradient of a fixed-iteration solve (the default) is not the exact derivative of its output
     model = DepthRestorer(trainable=True, num_layers=1, search_window=5, k=3, cg_tol=1e-13, cg_max_iter=500,
                           cg_fixed_iters=(), implicit_backward=implicit)
-    names = [f"layers.0.raw_{n}" for n in ("lam", "eta", "gamma", "mu1", "mu2")] + ["log_temperature"]
+    names = [f"layers.0.raw_{n}" for n in ("lam", "eta", "gamma", "mu1", "mu2")] + ["block_matcher.log_temperature"]
     start = tuple(dict(model.named_parameters())[n].detach().double().clone().requires_grad_() for n in names)
 
     def f(*params):

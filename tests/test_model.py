@@ -35,7 +35,7 @@ class TestDepthRestorer:
         loss = ((out - scene["gt"]) ** 2 * scene["mask"]).mean()
         loss.backward()
         expected = {f"layers.{i}.raw_{n}" for i in range(SMALL["num_layers"])
-                    for n in ("lam", "eta", "gamma", "mu1", "mu2")} | {"log_temperature"}
+                    for n in ("lam", "eta", "gamma", "mu1", "mu2")} | {"block_matcher.log_temperature"}
         if guidance_net:  # the guidance network's convolutions and one head per layer
             expected |= {f"guidance.{c}.{w}" for c in ("guide.0", "guide.2", "state", "mix")
                          for w in ("weight", "bias")}
@@ -62,15 +62,15 @@ class TestDepthRestorer:
         assert r.info["seconds"] == {}  # timing is opt-in
         assert set(m.restore_with_details(scene["depth"], scene["rgb"], timings=True).info["seconds"]) >= {"total"}
 
-    def test_forward_takes_batched_float_tensors_and_forwards_the_rest_with_a_warning(self, scene):
+    def test_forward_takes_batched_float_tensors_only_and_says_where_the_rest_goes(self, scene):
         m = DepthRestorer(**SMALL)
         d = scene["depth"]
-        with pytest.warns(DeprecationWarning, match="restore_with_details"):
-            legacy = m(d, scene["rgb"], return_details=True)
-        assert torch.equal(legacy.depth, m(d, scene["rgb"]))
-        with pytest.warns(DeprecationWarning, match="restore_depth"):
-            out = m(d[0, 0].numpy(), scene["rgb"])
-        assert isinstance(out, np.ndarray)
+        with pytest.raises(TypeError):  # the details have their own method: no return_details/timings flags
+            m(d, scene["rgb"], return_details=True)
+        for bad in (d[0, 0].numpy(), d[0]):  # numpy and (1,H,W) layouts are restore_depth's business
+            with pytest.raises((DTypeError, ShapeError), match="restore_depth"):
+                m(bad, scene["rgb"])
+        assert isinstance(restore_depth(d[0, 0].numpy(), scene["rgb"], model=m), np.ndarray)
         with pytest.raises(ShapeError, match="restore_depth"):
             m.restore_with_details(d[0], scene["rgb"])
         with pytest.raises(DTypeError, match="restore_depth"):
@@ -120,6 +120,22 @@ class TestDepthRestorer:
         m.save(tmp_path)
         m2 = DepthRestorer.load(tmp_path)
         torch.testing.assert_close(m(scene["depth"], scene["rgb"]), m2(scene["depth"], scene["rgb"]))
+
+    def test_state_dict_saved_before_the_block_matcher_owned_h_and_rho_loads(self, tmp_path, scene):
+        """Saved models keep ``log_temperature``/``log_color_weight`` at the top; both load paths move them."""
+        m = DepthRestorer(**SMALL, temperature=0.7, color_weight=250.0)
+        legacy = {("log_temperature" if k == "block_matcher.log_temperature" else
+                   "log_color_weight" if k == "block_matcher.log_color_weight" else k): v
+                  for k, v in m.state_dict().items()}
+        assert "log_temperature" in legacy and "block_matcher.log_temperature" not in legacy
+        fresh = DepthRestorer(**SMALL)
+        fresh.load_state_dict(legacy)  # strict: no missing, no unexpected key
+        assert float(fresh.block_matcher.temperature) == pytest.approx(0.7)
+        assert float(fresh.block_matcher.color_weight) == pytest.approx(250.0)
+        m.save(tmp_path)
+        torch.save(legacy, tmp_path / "state_dict.pt")
+        m2 = DepthRestorer.load(tmp_path)
+        torch.testing.assert_close(m(scene["depth"], scene["rgb"]), m2(scene["depth"], scene["rgb"]), rtol=0, atol=0)
 
     def test_upsampling(self, scene):
         gt = scene["gt"][..., :48, :64]

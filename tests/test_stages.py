@@ -33,21 +33,22 @@ def test_every_stage_holds_its_group():
     assert isinstance(model.initializer, Initializer)
     assert model.initializer.settings == c.initial and model.initializer.upsampling == c.upsampling
     assert model.block_matcher.settings == c.block_matching and model.singular_detector.settings == c.singular
+    assert isinstance(model.block_matcher, BlockMatcher)
     for layer in model.layers:
-        assert isinstance(layer.block_matcher, BlockMatcher) and layer.block_matcher.settings == c.block_matching
+        assert not hasattr(layer, "block_matcher")  # one matcher, the model's: it owns h, shared by every layer
         assert isinstance(layer.singular_detector, SingularDetector) and layer.singular_detector.settings == c.singular
         assert isinstance(layer.linear_solver, LinearSolver) and layer.linear_solver.settings == c.solver
         assert layer.terms == c.layer and layer.value_prior == c.value_prior and layer.upsampling == c.upsampling
     # the overrides reached the groups the stages hold
-    assert model.layers[0].block_matcher.settings.rematch == "exact"
+    assert model.block_matcher.settings.rematch == "exact"
     assert model.layers[1].singular_detector.settings.tau == 0.4
     assert model.layers[2].linear_solver.settings.fixed_iters == (4, 2)
     assert model.initializer.settings.fill == "jbf"
 
 
-def test_stages_add_no_state_dict_keys():
+def test_only_the_block_matcher_holds_state():
     keys = set(DepthRestorer(**SMALL).state_dict())
-    assert keys == {"log_temperature", "log_color_weight"} | {
+    assert keys == {"block_matcher.log_temperature", "block_matcher.log_color_weight"} | {
         f"layers.{i}.raw_{n}" for i in range(SMALL["num_layers"]) for n in ("lam", "eta", "gamma", "mu1", "mu2")}
 
 
@@ -66,11 +67,14 @@ def test_stages_record_into_the_run_log(scene, timed):
     """Each stage appends to the context's log; the stage times appear in ``info["seconds"]`` only when asked."""
     model = DepthRestorer(**SMALL)
     calls = []
-    for name in ("block_matcher", "singular_detector"):
-        getattr(model.layers[0], name).register_forward_hook(lambda mod, args, out, n=name: calls.append(n))
+    hooked = {"block_matcher": model.block_matcher, "singular_detector": model.layers[0].singular_detector}
+    for name, module in hooked.items():
+        module.register_forward_hook(lambda mod, args, out, n=name: calls.append(n))
     info = model.restore_with_details(scene["depth"], scene["rgb"], timings=timed).info
     assert len(info["cg_iterations"]) == SMALL["num_layers"]
     assert "singular_detector" in calls
+    # x⁰'s matches and those of each scheduled layer go through the model's one matcher
+    assert calls.count("block_matcher") == 1 + sum(i in model.config.match_layers for i in range(SMALL["num_layers"]))
     if timed:
         assert {"block_matching", "singular", "cg", "total"} <= set(info["seconds"])
     else:

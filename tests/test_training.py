@@ -180,7 +180,7 @@ def test_every_parameter_that_requires_grad_gets_a_finite_gradient(guidance_net)
     trainable = {n for n, p in model.named_parameters() if p.requires_grad}
     with_grad = {n for n, p in model.named_parameters() if p.grad is not None and torch.isfinite(p.grad).all()}
     assert trainable == with_grad, sorted(trainable ^ with_grad)
-    assert "log_color_weight" not in trainable and "log_temperature" in trainable
+    assert "block_matcher.log_color_weight" not in trainable and "block_matcher.log_temperature" in trainable
     assert any(n.startswith("guidance.") for n in trainable) == guidance_net
 
 

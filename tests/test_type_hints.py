@@ -31,7 +31,8 @@ def _methods(cls: type):
             value = value.__func__
         elif isinstance(value, property):
             value = value.fget
-        if inspect.isfunction(value):
+        # a Protocol's __init__ is typing's, not written here
+        if inspect.isfunction(value) and value.__module__.startswith("torch_depth_sr"):
             yield name, value
 
 

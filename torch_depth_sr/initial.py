@@ -1,6 +1,6 @@
-"""The initial estimate: x⁰ on the observation grid (:func:`initial_estimate`, a colour-guided fill) and on the
-output grid (:func:`~torch_depth_sr.upsampling.upsample_initial` under guided upsampling), and the module that
-owns their settings, :class:`Initializer`.
+"""The state before the first layer: x⁰ on the observation grid (:func:`initial_estimate`, a colour-guided fill) and
+on the output grid (:func:`~torch_depth_sr.upsampling.upsample_initial` under guided upsampling), Q⁰ and the first
+matches and α⁰; and the module that owns their settings and builds it, :class:`Initializer`.
 """
 from __future__ import annotations
 
@@ -9,9 +9,12 @@ from typing import Optional, Union
 import torch
 from torch import nn
 
-from .config import InitConfig, RestorerConfig, UpsamplingConfig
+from .config import InitConfig, LayerConfig, RestorerConfig, UpsamplingConfig
 from .fill import fill_holes
-from .operators import Degradation, area_downsample
+from .nonlocal_prior import nonlocal_terms
+from .operators import Degradation, area_downsample, grad
+from .stages import SingularDetector
+from .state import RestorationContext, RestorationState
 from .upsampling import upsample_initial
 
 __all__ = ["Initializer", "initial_estimate"]
@@ -72,9 +75,11 @@ def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[t
 
 
 class Initializer(nn.Module):
-    """x⁰ by the :class:`~torch_depth_sr.config.InitConfig` ``settings`` (the colour-guided fill on the observation
-    grid, which measurements it keeps) and the :class:`~torch_depth_sr.config.UpsamplingConfig` ``upsampling`` (x⁰
-    on the output grid under guided upsampling)."""
+    """The state before the first layer (:meth:`forward`: x⁰, Q⁰, the first matches, α⁰) by the
+    :class:`~torch_depth_sr.config.InitConfig` ``settings`` (the colour-guided fill on the observation grid, which
+    measurements it keeps, whether Q⁰ comes from the singular test) and the
+    :class:`~torch_depth_sr.config.UpsamplingConfig` ``upsampling`` (x⁰ on the output grid under guided
+    upsampling). The block matcher and the singular detector it runs are the model's, passed in."""
 
     def __init__(self, settings: InitConfig, upsampling: UpsamplingConfig):
         super().__init__()
@@ -102,13 +107,43 @@ class Initializer(nn.Module):
         keep = self.settings.keep_observed and guided is not None
         return torch.where(observed > 0, y, guided) if keep else guided
 
-    def forward(self, x0: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
-                noise: Optional[torch.Tensor] = None) -> torch.Tensor:
+    def output_grid(self, x0: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
+                    noise: Optional[torch.Tensor] = None) -> torch.Tensor:
         """x⁰ on the output grid from ``x0`` on the observation grid: itself when ``K`` is the identity, else
         :func:`~torch_depth_sr.upsampling.upsample_initial` (``noise (B,)``: the noise σ in the units of ``x0``)."""
         if K.is_identity:
             return x0
         return upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise, degradation=K)
+
+    def forward(self, ctx: RestorationContext, terms: LayerConfig, singular_detector: SingularDetector,
+                noise: Optional[torch.Tensor] = None) -> RestorationState:
+        """The state before the first layer: x⁰, Q⁰ and the first matches and α⁰ of the observation ``ctx.y`` (in
+        units of the scale, 0 where missing) under ``ctx.K``; sets ``ctx.fill_confident`` and, for denoising with
+        a guided prior, ``ctx.prior``. ``terms`` says which terms the layers compute (whether x⁰ needs matches, a
+        prior); matching goes through ``ctx.block_matcher``; ``noise (B,)``: the noise σ in the units of ``y``."""
+        y, observed, guide, K = ctx.y, ctx.observed, ctx.rgb, ctx.K
+        # colour-guided estimate on the observation grid, every pixel; holes at depth gaps filled from one side
+        guided, ctx.fill_confident = self.guided(y, observed, guide, K)
+        x0 = self.observation_grid(y, observed, guided)
+        matches, q, conf = None, observed, observed
+        # the singular test compares the estimate with the observation pixel by pixel: K = I only
+        if terms.use_singular and K.is_identity and self.detects_singular and guide is not None:
+            # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
+            # those of the raw input; singular pixels start from the guided value instead of y.
+            q, conf = singular_detector(ctx, guided, ctx.block_matcher(guided, ctx, observed))
+            x0 = self.observation_grid(y, observed, guided, trusted=q)
+        if not K.is_identity:  # x⁰ to the output grid
+            x0 = self.output_grid(x0, observed, guide, K, noise=noise)
+        elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
+            ctx.prior = guided
+        zeros2 = x0.new_zeros(x0.shape[0], 2, *x0.shape[-2:])
+        alpha = zeros2
+        if terms.use_nonlocal or (terms.use_singular and K.is_identity):  # match x⁰ for the nonlocal term
+            matches = ctx.block_matcher(x0, ctx, observed)
+        if terms.use_nonlocal:
+            alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
+        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(y), alpha=alpha, q=q,
+                                confidence=conf, matches=matches)
 
     def extra_repr(self) -> str:
         return f"fill={self.settings.fill!r}, upsampling={self.upsampling.init!r}"

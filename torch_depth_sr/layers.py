@@ -33,7 +33,7 @@ from .config import LayerConfig, RestorerConfig, SolverConfig, ValuePriorConfig
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad, grad_adjoint
 from .shrinkage import group_soft_threshold, soft_threshold
-from .stages import (BlockMatcher, LinearSolver, SingularDetector, run_block_matching, singular_test, solve_x,
+from .stages import (LinearSolver, SingularDetector, run_block_matching, singular_test, solve_x,
                      supported_pixels)
 from .state import RestorationContext, RestorationState, RunLog, stage
 
@@ -66,9 +66,10 @@ class UnrolledLayer(nn.Module):
     """One iteration; owns its positive parameters λ, η, γ, μ₁, μ₂ (softplus of raw values), the settings groups
     it reads itself, ``terms`` (:class:`~torch_depth_sr.config.LayerConfig`), ``value_prior`` and ``upsampling`` (the
     weights' policy under a degradation other than the identity), and its stages, each holding its group as
-    ``settings``: ``block_matcher`` (:class:`~torch_depth_sr.stages.BlockMatcher`), ``singular_detector``
-    (:class:`~torch_depth_sr.stages.SingularDetector`) and ``linear_solver``
-    (:class:`~torch_depth_sr.stages.LinearSolver`). All are taken from ``config`` when the layer is built."""
+    ``settings``: ``singular_detector`` (:class:`~torch_depth_sr.stages.SingularDetector`) and ``linear_solver``
+    (:class:`~torch_depth_sr.stages.LinearSolver`). All are taken from ``config`` when the layer is built. It
+    matches through the model's :class:`~torch_depth_sr.stages.BlockMatcher` (``ctx.block_matcher``, which owns the
+    temperature h shared by all layers) when that schedules this layer."""
 
     names = ("lam", "eta", "gamma", "mu1", "mu2")
 
@@ -78,7 +79,6 @@ class UnrolledLayer(nn.Module):
         self.terms: LayerConfig = config.layer
         self.value_prior: ValuePriorConfig = config.value_prior
         self.upsampling = config.upsampling
-        self.block_matcher = BlockMatcher(config.block_matching)
         self.singular_detector = SingularDetector(config.singular)
         self.linear_solver = LinearSolver(config.solver)
         for n in self.names:
@@ -114,8 +114,8 @@ class UnrolledLayer(nn.Module):
             w, mu2 = s.w, torch.zeros_like(mu2)
         e = s.q * soft_threshold(residual, gamma_thr) if t.use_outliers else s.e
         matches, alpha, q, conf = s.matches, s.alpha, s.q, s.confidence
-        if matches is not None and self.block_matcher.scheduled(self.index):
-            matches = self.block_matcher(s.x, ctx, s.q, previous=matches)
+        if matches is not None and ctx.block_matcher.scheduled(self.index):
+            matches = ctx.block_matcher(s.x, ctx, s.q, previous=matches)
         # the value prior and the singular test compare the estimate with the observation pixel by pixel
         vp = self.value_prior
         value_prior = vp.weight > 0 and K.is_identity and matches is not None

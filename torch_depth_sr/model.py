@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import pickle
 import time
-import warnings
 from pathlib import Path
 from typing import Any, NamedTuple, Optional, Sequence, Union
 
@@ -30,11 +29,10 @@ from .fidelity import clamp_to_measurements, noise_band
 from .guidance import GuidanceNet
 from .initial import Initializer, initial_estimate
 from .layers import UnrolledLayer
-from .nonlocal_prior import nonlocal_terms
 from .noise import depth_scale, implausible, quantisation_step
-from .operators import Degradation, degradation_operator, grad
+from .operators import degradation_operator
 from .stages import BlockMatcher, SingularDetector
-from .state import RestorationContext, RestorationState, RunLog
+from .state import RestorationContext, RunLog
 from .upsampling import upsample_initial
 
 __all__ = [
@@ -109,18 +107,18 @@ class DepthRestorer(nn.Module):
         self.terms, self.fidelity_band = config.layer, config.fidelity_band
         self.degradation = config.upsampling.degradation  # the name of K's kind; K itself is built per forward
         self.initializer = Initializer(config.initial, config.upsampling)
-        self.block_matcher = BlockMatcher(config.block_matching)
         self.singular_detector = SingularDetector(config.singular)
         self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
-        self.log_temperature = nn.Parameter(torch.tensor(config.temperature).log(), requires_grad=trainable)
-        # ρ weighs colour in the block distance, which picks the matches: a discrete choice with no gradient, so
-        # ρ is a buffer, not a parameter (same state-dict key as before, so saved models still load)
-        self.register_buffer("log_color_weight", torch.tensor(max(config.color_weight, 1e-8)).log())
+        # one block matcher, owning the temperature h (learns) and the colour weight ρ (a buffer); x⁰'s matches and
+        # every scheduled layer's go through it. Built after the layers so that the parameters keep their order
+        # (the optimiser's state in a training checkpoint is kept by position).
+        self.block_matcher = BlockMatcher(config.block_matching, config.temperature, config.color_weight, trainable)
         # per-pixel multipliers of the layers' thresholds (issue 14); None = the scalar model (no state-dict keys)
         self.guidance: Optional[GuidanceNet] = None
         if config.guidance_net:
             self.guidance = GuidanceNet(config.num_layers, config.guidance_channels,
                                         config.guidance_range).requires_grad_(trainable)
+        self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod
     def ablation(cls, name: str, **overrides) -> "DepthRestorer":
@@ -143,8 +141,7 @@ class DepthRestorer(nn.Module):
         return cls(**{**PRESETS[name], **overrides})
 
     def forward(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None, mask: Optional[torch.Tensor] = None,
-                noise_sigma: NoiseSigma = None, scale_factor: Optional[int] = None, fill: str = "all", *,
-                return_details: Optional[bool] = None, timings: Optional[bool] = None) -> torch.Tensor:
+                noise_sigma: NoiseSigma = None, scale_factor: Optional[int] = None, fill: str = "all") -> torch.Tensor:
         """The restored depth of ``depth (B,1,H,W)``, a float tensor, guided by ``rgb (B,3,H,W)`` in [0,1].
 
         Args:
@@ -161,18 +158,9 @@ class DepthRestorer(nn.Module):
             trusted set, outliers and run information as well.
 
         numpy arrays, ``(H,W)``/``(1,H,W)`` layouts and integer dtypes are the business of :func:`restore_depth`
-        (and of :class:`~torch_depth_sr.transforms.RestoreDepth` and the command line), not of the module; passing
-        them here, or ``return_details``/``timings``, still works through :func:`restore_depth` but is deprecated.
+        (and of :class:`~torch_depth_sr.transforms.RestoreDepth` and the command line), not of the module: they
+        are refused here with a message that says so.
         """
-        if return_details is not None or timings is not None or not _is_model_input(depth, rgb, mask):
-            warnings.warn("DepthRestorer.forward takes (B,1,H,W) float tensors and returns the depth only: use "
-                          "model.restore_with_details(...) for the details (timings=True to time the stages) and "
-                          "torch_depth_sr.restore_depth(depth, rgb, model=model) for numpy arrays, (H,W) layouts and "
-                          "integer dtypes. This call was passed on to restore_depth.", DeprecationWarning,
-                          stacklevel=2)
-            return restore_depth(depth, rgb, mask, model=self, noise_sigma=noise_sigma, scale_factor=scale_factor,
-                                 return_details=bool(return_details), fill=fill,
-                                 timings=bool(return_details) if timings is None else bool(timings))
         out = self._run_tensors(depth, rgb, mask, noise_sigma, scale_factor, fill, timed=False)
         return out.depth.to(device=depth.device, dtype=depth.dtype)
 
@@ -218,7 +206,7 @@ class DepthRestorer(nn.Module):
         say), so their grid step is at least 1.
         """
         dtype = y.dtype
-        dev = self.log_temperature.device  # compute where the model lives; callers move the result back
+        dev = self.block_matcher.log_temperature.device  # compute where the model lives; callers move the result back
         y, observed = y.to(dev), observed.to(dev)
         b, _, h, w = y.shape
         guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
@@ -242,8 +230,11 @@ class DepthRestorer(nn.Module):
             torch.cuda.synchronize(y.device)
         t0 = time.perf_counter()
         with torch.set_grad_enabled(grad_needed):
-            state, ctx = self._initial_state(yn, observed, guide, K, noise=sigma / scale, grid_step=step / scale,
-                                             timings={} if timed else None)
+            ctx = RestorationContext(y=yn, observed=observed, rgb=guide, K=K, block_matcher=self.block_matcher,
+                                     grid_step=step / scale, log=RunLog(timings={} if timed else None))
+            state = self.initializer(ctx, self.terms, self.singular_detector, noise=sigma / scale)
+            if self.guidance is not None:  # colour features once per forward; each layer adds its state's
+                ctx.guidance = self.guidance.prepare(guide, like=state.x)
             for layer in self.layers:
                 state = layer(state, ctx)
         if timed:
@@ -262,46 +253,6 @@ class DepthRestorer(nn.Module):
                 "cg_iterations": [int(n.max()) for n in ctx.log.cg_iterations], "factor": factor,
                 "seconds": dict(ctx.log.timings or {})}
         return RestorationResult(x, state.confidence * observed, state.q, state.e * s4, info)
-
-    def _initial_state(self, yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
-                       noise: Optional[torch.Tensor] = None, grid_step: Optional[torch.Tensor] = None,
-                       timings: Optional[dict] = None) -> tuple[RestorationState, RestorationContext]:
-        """The context of this forward (its run log times the stages when ``timings`` is a dict) and the state
-        before the first layer: x⁰, Q⁰ and the first matches and α."""
-        terms = self.terms
-        ctx = RestorationContext(y=yn, observed=observed, rgb=guide, K=K,
-                                 temperature=self.log_temperature.exp(), color_weight=self.log_color_weight.exp(),
-                                 grid_step=grid_step, log=RunLog(timings=timings))
-        # colour-guided estimate on the observation grid, every pixel; holes at depth gaps filled from one side
-        guided, ctx.fill_confident = self.initializer.guided(yn, observed, guide, K)
-        x0 = self.initializer.observation_grid(yn, observed, guided)
-        b = yn.shape[0]
-        matches, q, conf = None, observed, observed
-        # the singular test compares the estimate with the observation pixel by pixel: K = I only
-        detect_first = terms.use_singular and K.is_identity and self.initializer.detects_singular and guide is not None
-        if detect_first:
-            # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
-            # those of the raw input; singular pixels start from the guided value instead of y.
-            matches = self.block_matcher(guided, ctx, observed)
-            q, conf = self.singular_detector(ctx, guided, matches)
-            x0 = self.initializer.observation_grid(yn, observed, guided, trusted=q)
-            matches = None  # match again on x⁰ for the nonlocal term
-        if not K.is_identity:  # x⁰ to the output grid
-            x0 = self.initializer(x0, observed, guide, K, noise=noise)
-        elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
-            ctx.prior = guided
-        if self.guidance is not None:  # colour features once per forward; each layer adds its state's
-            ctx.guidance = self.guidance.prepare(guide, like=x0)
-        _, _, hh, ww = x0.shape
-        zeros2 = x0.new_zeros(b, 2, hh, ww)
-        alpha = zeros2
-        if matches is None and (terms.use_nonlocal or (terms.use_singular and K.is_identity)):
-            matches = self.block_matcher(x0, ctx, observed)
-        if terms.use_nonlocal:
-            alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
-        state = RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(yn), alpha=alpha, q=q,
-                                 confidence=conf, matches=matches)
-        return state, ctx
 
     # ---- parameters -------------------------------------------------------------------------
     def layer_parameters(self) -> list[dict]:
@@ -489,6 +440,18 @@ def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optio
                                     for k in ("confidence", "trusted", "outliers")})
 
 
+_LEGACY_KEYS = {"log_temperature": "block_matcher.log_temperature",
+                "log_color_weight": "block_matcher.log_color_weight"}
+
+
+def _rename_legacy_keys(state: dict, prefix: str, *_: Any) -> None:
+    """Load-state-dict pre-hook: a state dict saved before the block matcher owned h and ρ keeps them at the top
+    (``log_temperature``, ``log_color_weight``); move them to their owner's keys (in place, as the hook must)."""
+    for old, new in _LEGACY_KEYS.items():
+        if prefix + old in state and prefix + new not in state:
+            state[prefix + new] = state.pop(prefix + old)
+
+
 _NOT_A_STATE_DICT = "not a torch_depth_sr state dict"
 
 
@@ -509,6 +472,9 @@ def _load_state_file(model: nn.Module, path: Path, map_location) -> None:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ModelFileError(path, f"{_NOT_A_STATE_DICT}: it cannot be read as saved tensors ({first}). "
                                    "It may be truncated or of another program.") from exc
+    if isinstance(state, dict):
+        state = dict(state)
+        _rename_legacy_keys(state, "")
     _check_state_matches(model, state, path)
     model.load_state_dict(state)
 

@@ -35,17 +35,18 @@ __all__ = [
 
 
 def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor, settings: BlockMatchingConfig,
+                       temperature: torch.Tensor, color_weight: torch.Tensor,
                        previous: Optional[BlockMatches] = None) -> BlockMatches:
     """Block matching on the current estimate; untrusted pixels masked out of the depth distance.
 
     The trusted set ``q`` lives on the observation grid, so it masks the distance only when that is the output
-    grid (``K = I``). The weights ``softmax(−d/h)`` come with the matches, differentiable in the temperature
-    ``h`` when it requires grad; the search itself runs without gradient. With ``previous`` matches and
+    grid (``K = I``). The weights ``softmax(−d/h)`` come with the matches, differentiable in the ``temperature``
+    ``h`` when it requires grad; the search itself runs without gradient, and so does the ``color_weight`` ρ. With ``previous`` matches and
     ``settings.rematch == "refine"`` only their offsets and a lattice of the window are re-ranked.
     """
     trust = q.detach() if ctx.K.is_identity else None
     kw = dict(block_size=settings.block_size, search_window=settings.search_window, k=settings.k,
-              color_weight=ctx.color_weight.detach(), temperature=ctx.temperature, include_self=settings.include_self)
+              color_weight=color_weight.detach(), temperature=temperature, include_self=settings.include_self)
     if previous is not None and settings.rematch == "refine":
         return refine_matches(x.detach(), previous, ctx.rgb, trust, **kw, reach=0, lattice=settings.rematch_lattice)
     return block_match(x.detach(), ctx.rgb, trust, **kw)
@@ -129,15 +130,30 @@ def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: tor
 
 class BlockMatcher(nn.Module):
     """Block matching of the current estimate (:func:`run_block_matching`) with its
-    :class:`~torch_depth_sr.config.BlockMatchingConfig` ``settings``: block size, search window, k, the layers that
-    match again (:meth:`scheduled`) and how. Times itself as the stage ``"block_matching"``.
-
-    The temperature ``h`` and the colour weight ``ρ`` are the model's (``ctx.temperature``, ``ctx.color_weight``).
+    :class:`~torch_depth_sr.config.BlockMatchingConfig` ``settings`` (block size, search window, k, the layers that
+    match again, :meth:`scheduled`, and how) and its two numbers: the weight temperature ``h``, a parameter
+    (``log_temperature``; learns when ``trainable``: the weights ``softmax(−d/h)`` are differentiable in it), and
+    the colour weight ``ρ`` of the block distance, a buffer (``log_color_weight``: ρ only picks the matches, a
+    discrete choice with no gradient). The model builds one and every layer matches through it
+    (``ctx.block_matcher``). Times itself as the stage ``"block_matching"``.
     """
 
-    def __init__(self, settings: BlockMatchingConfig):
+    def __init__(self, settings: BlockMatchingConfig, temperature: float, color_weight: float,
+                 trainable: bool = False):
         super().__init__()
         self.settings = settings
+        self.log_temperature = nn.Parameter(torch.tensor(float(temperature)).log(), requires_grad=trainable)
+        self.register_buffer("log_color_weight", torch.tensor(max(float(color_weight), 1e-8)).log())
+
+    @property
+    def temperature(self) -> torch.Tensor:
+        """``h`` as a 0-d tensor (carries the gradient to ``log_temperature``)."""
+        return self.log_temperature.exp()
+
+    @property
+    def color_weight(self) -> torch.Tensor:
+        """``ρ`` as a 0-d tensor."""
+        return self.log_color_weight.exp()
 
     def scheduled(self, index: int) -> bool:
         """Whether layer ``index`` matches again (``settings.match_layers``)."""
@@ -148,11 +164,13 @@ class BlockMatcher(nn.Module):
         """The matches of ``x (B,1,H,W)``, untrusted pixels (``q`` = 0) masked when ``K = I``; see
         :func:`run_block_matching`."""
         with stage(ctx.log.timings, "block_matching", x.device):
-            return run_block_matching(x, ctx, q, self.settings, previous=previous)
+            return run_block_matching(x, ctx, q, self.settings, self.temperature, self.color_weight,
+                                      previous=previous)
 
     def extra_repr(self) -> str:
         s = self.settings
-        return f"block_size={s.block_size}, search_window={s.search_window}, k={s.k}, rematch={s.rematch!r}"
+        return (f"block_size={s.block_size}, search_window={s.search_window}, k={s.k}, rematch={s.rematch!r}, "
+                f"temperature={float(self.temperature):.3g}, color_weight={float(self.color_weight):.3g}")
 
 
 class SingularDetector(nn.Module):

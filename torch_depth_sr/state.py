@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Iterator, Optional
+from typing import Iterator, Optional, Protocol
 
 import torch
 
@@ -17,7 +17,7 @@ from .block_matching import BlockMatches
 from .guidance import PreparedGuidance
 from .operators import Degradation
 
-__all__ = ["RestorationContext", "RestorationState", "RunLog", "stage"]
+__all__ = ["Matcher", "RestorationContext", "RestorationState", "RunLog", "stage"]
 
 
 @dataclass
@@ -63,6 +63,20 @@ def stage(timings: Optional[dict], name: str, device: torch.device) -> Iterator[
         timings[name] = timings.get(name, 0.0) + time.perf_counter() - t0
 
 
+class Matcher(Protocol):
+    """What the layers need of a block matcher (:class:`~torch_depth_sr.stages.BlockMatcher` implements it; this
+    module only names the interface, so it does not import the stages that use it)."""
+
+    def scheduled(self, index: int) -> bool:
+        """Whether layer ``index`` matches again."""
+        ...
+
+    def __call__(self, x: torch.Tensor, ctx: "RestorationContext", q: torch.Tensor,
+                 previous: Optional[BlockMatches] = None) -> BlockMatches:
+        """The matches of ``x`` (untrusted pixels ``q`` = 0 masked when ``K = I``)."""
+        ...
+
+
 @dataclass
 class RestorationContext:
     """What stays fixed during the unrolled iterations: the observation, the guide and the degradation ``K``; and
@@ -72,8 +86,9 @@ class RestorationContext:
     observed: torch.Tensor  # (B,1,h,w)
     rgb: Optional[torch.Tensor]  # (B,3,H,W)
     K: Degradation  # from the output grid (H,W) to the observation grid (h,w); Identity when they are one
-    temperature: torch.Tensor  # scalar, positive
-    color_weight: torch.Tensor  # scalar, positive
+    # the model's one block matcher (its settings, the temperature h and the colour weight ρ): x⁰'s matches and
+    # every scheduled layer's go through it
+    block_matcher: "Matcher"
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
     grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
     fill_confident: Optional[torch.Tensor] = None  # (B,1,h,w) {0,1}: measured, or a hole filled from a clear side

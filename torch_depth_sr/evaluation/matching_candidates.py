@@ -49,8 +49,8 @@ def _recording(calls: list):
     """Record the inputs of every block-matching pass of the model."""
     original = stages.run_block_matching  # what BlockMatcher calls
 
-    def record(x, ctx, q, settings, previous=None):
-        m = original(x, ctx, q, settings, previous)
+    def record(x, ctx, q, settings, temperature, color_weight, previous=None):
+        m = original(x, ctx, q, settings, temperature, color_weight, previous)
         calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if ctx.K.is_identity else None,
                           rgb=ctx.rgb, previous=previous, exact=m, ctx=ctx))
         return m
@@ -85,8 +85,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     rows = []
     for n, call in enumerate(c for c in calls if c["previous"] is not None):
         ctx = call["ctx"]
+        matcher = ctx.block_matcher
         kw = dict(block_size=c.block_size, search_window=c.search_window, k=c.k,
-                  color_weight=float(ctx.color_weight), temperature=float(ctx.temperature))
+                  color_weight=float(matcher.color_weight), temperature=float(matcher.temperature))
         exact = call["exact"]
         for name, spec in CANDIDATES.items():
             with torch.no_grad():

@@ -134,7 +134,7 @@ def _stage_runner(method: str):
     model = DepthRestorer()
     c = model.config
     kw = dict(block_size=c.block_size, search_window=c.search_window, k=c.k,
-              color_weight=float(model.log_color_weight.exp()), temperature=float(model.log_temperature.exp()))
+              color_weight=float(model.block_matcher.color_weight), temperature=float(model.block_matcher.temperature))
     cache: dict = {}
 
     def normalised(y):

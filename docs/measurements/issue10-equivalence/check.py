@@ -20,6 +20,10 @@ import torch
 import torch.nn.functional as F
 
 
+# parameters that moved to the module owning them: compared under their old names
+_LEGACY_NAMES = {"block_matcher.log_temperature": "log_temperature"}
+
+
 def _inputs(factor: int, degradation: str, holes: bool, dtype=torch.float32):
     from torch_depth_sr.datasets.synthetic import make_scene
 
@@ -130,7 +134,7 @@ def run(path: str) -> None:
         out = model(y, rgb)
         out.square().mean().backward()
         results[f"grad/{name}"] = {"out": out.detach(), **{
-            n: p.grad.clone() for n, p in model.named_parameters() if p.grad is not None}}
+            _LEGACY_NAMES.get(n, n): p.grad.clone() for n, p in model.named_parameters() if p.grad is not None}}
     torch.save(results, path)
     print(f"{len(results)} cases -> {path}", file=sys.stderr)
 
