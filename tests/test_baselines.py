@@ -155,7 +155,7 @@ class TestJointBilateralFilter:
             joint_bilateral_filter(depth, rgb, kernel_size=4)
         with pytest.raises(DepthSRError, match="positive"):
             joint_bilateral_filter(depth, rgb, sigma_color=0.0)
-        with pytest.raises(ShapeError, match=r"4x5, too small for kernel_size=11.*kernel_size <= 7"):
+        with pytest.raises(ShapeError, match=r"4x5; it must be at least 6x6.*kernel_size=11.*kernel_size <= 7"):
             joint_bilateral_filter(depth[..., :4, :5], rgb[..., :4, :5], kernel_size=11)
         assert joint_bilateral_filter(depth[..., :4, :5], rgb[..., :4, :5], kernel_size=7).shape == (1, 1, 4, 5)
 

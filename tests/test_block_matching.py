@@ -186,7 +186,7 @@ class TestBlockMatchErrors:
             block_match(torch.rand(1, 1, 30, 30), search_window=20)
 
     def test_image_smaller_than_block(self):
-        with pytest.raises(ShapeError, match="depth is 4x9, smaller than one 5x5 block"):
+        with pytest.raises(ShapeError, match="depth is 4x9; it must be at least 5x5 .one 5x5 block"):
             block_match(torch.rand(1, 1, 4, 9), search_window=3, k=1)
 
     def test_k_too_large(self):

@@ -41,7 +41,7 @@ def test_gradcheck_wrt_grad_x_and_weight():
 def test_shape_error():
     m = _matches()
     bad = BlockMatches(m.dist, m.index, m.weight[:, :2])
-    with pytest.raises(ShapeError, match="must have the same shape"):
+    with pytest.raises(ShapeError, match="matches.weight must have the shape of matches.index"):
         nonlocal_gradient(torch.zeros(2, 2, 9, 10, dtype=torch.float64), bad)
     with pytest.raises(ShapeError, match="must share"):
         nonlocal_gradient(torch.zeros(2, 2, 8, 10, dtype=torch.float64), m)

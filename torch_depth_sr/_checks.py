@@ -9,7 +9,8 @@ import torch
 
 from .errors import DTypeError, ParameterError, ShapeError
 
-__all__ = ["check_4d", "check_same_hw", "check_floating", "check_min_size", "check_noise_sigma", "check_scale_factor"]
+__all__ = ["check_4d", "check_same_hw", "check_same_shape", "check_per_sample", "check_divisible", "check_floating",
+           "check_min_size", "check_noise_sigma", "check_scale_factor"]
 
 
 def check_4d(x: torch.Tensor, name: str, channels: int | Sequence[int] | None = None) -> None:
@@ -29,14 +30,40 @@ def check_4d(x: torch.Tensor, name: str, channels: int | Sequence[int] | None = 
             )
 
 
-def check_same_hw(a: torch.Tensor, b: torch.Tensor, name_a: str, name_b: str) -> None:
-    """Raise ShapeError unless ``a`` and ``b`` share batch size and spatial size."""
+def check_same_hw(a: torch.Tensor, b: torch.Tensor, name_a: str, name_b: str,
+                  hint: str = "Align or resize the colour image to the depth map first.") -> None:
+    """Raise ShapeError unless ``a`` and ``b`` share batch size and spatial size (``b`` is the one reported)."""
     if a.shape[0] != b.shape[0] or a.shape[-2:] != b.shape[-2:]:
         raise ShapeError(
             f"{name_a} and {name_b} must share batch size and height/width; got {name_a} {tuple(a.shape)} "
-            f"and {name_b} {tuple(b.shape)}. Align or resize the colour image to the depth map first.",
+            f"and {name_b} {tuple(b.shape)}." + (f" {hint}" if hint else ""),
             actual=tuple(b.shape), expected=f"batch {a.shape[0]} and {tuple(a.shape[-2:])} like {name_a}",
         )
+
+
+def check_same_shape(x: Any, ref: Any, name: str, ref_name: str, hint: str = "") -> None:
+    """Raise ShapeError unless ``x`` (tensor or array) has exactly the shape of ``ref`` (``x`` is the one reported)."""
+    if tuple(x.shape) != tuple(ref.shape):
+        raise ShapeError(f"{name} must have the shape of {ref_name} {tuple(ref.shape)}; got {tuple(x.shape)}."
+                         + (f" {hint}" if hint else ""),
+                         actual=tuple(x.shape), expected=f"{tuple(ref.shape)}, {ref_name}'s shape")
+
+
+def check_per_sample(t: torch.Tensor, name: str, batch: int) -> None:
+    """Raise ShapeError unless the tensor ``t`` is 0-d or 1-d with 1 or ``batch`` values (one value per sample)."""
+    if t.ndim > 1 or (t.ndim == 1 and t.shape[0] not in (1, batch)):
+        raise ShapeError(f"{name} must be a float, a 0-d tensor or a per-sample (B,) tensor with B={batch}; "
+                         f"got a tensor of shape {tuple(t.shape)}.",
+                         actual=tuple(t.shape), expected=f"(), (1,) or ({batch},)")
+
+
+def check_divisible(x: torch.Tensor, name: str, s: int, who: str) -> None:
+    """Raise ShapeError unless ``x``'s height and width are multiples of ``s`` (``who`` names the caller)."""
+    h, w = x.shape[-2:]
+    if h % s or w % s:
+        raise ShapeError(f"{who} needs H and W divisible by s={s}; got {name} of shape {tuple(x.shape)}. "
+                         f"Pad or crop the high-resolution grid to a multiple of {s} first.",
+                         actual=tuple(x.shape), expected=f"H, W multiples of {s}")
 
 
 def check_floating(x: torch.Tensor, name: str) -> None:

@@ -80,7 +80,8 @@ def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch
         raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.",
                          actual=tuple(t.shape), expected="(H,W), (1,H,W) or (B,1,H,W)")
     if t.shape[0] == 0 or t.shape[-1] == 0 or t.shape[-2] == 0:
-        raise ShapeError(f"depth is empty: shape {tuple(t.shape)}.")
+        raise ShapeError(f"depth is empty: shape {tuple(t.shape)}.", actual=tuple(t.shape),
+                         expected="B, H, W >= 1")
     y = t.to(compute_dtype)
     finite_or_nan = torch.isfinite(y) | torch.isnan(y)
     if not bool(finite_or_nan.all()):
@@ -150,7 +151,8 @@ def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) ->
     if t.shape[0] == 1 and batch > 1:
         t = t.expand(batch, -1, -1, -1)
     if t.shape[0] != batch:
-        raise ShapeError(f"rgb batch size {t.shape[0]} does not match depth batch size {batch}.")
+        raise ShapeError(f"rgb batch size {t.shape[0]} does not match depth batch size {batch}.",
+                         actual=tuple(rgb.shape), expected=f"batch 1 or {batch}, depth's batch size")
     return t.clamp(0, 1).contiguous()
 
 

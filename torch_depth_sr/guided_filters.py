@@ -25,7 +25,7 @@ import kornia
 import torch
 import torch.nn.functional as F
 
-from ._checks import check_4d, check_floating, check_same_hw
+from ._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw, check_same_shape
 from .errors import DepthSRError, ShapeError
 from .fill import pull_push
 
@@ -53,11 +53,7 @@ def _resolve_mask(depth: torch.Tensor, mask: torch.Tensor | None, name: str = "m
     if mask is None:
         return (torch.isfinite(depth) & (depth > 0)).to(depth.dtype)
     check_4d(mask, name, channels=1)
-    if mask.shape != depth.shape:
-        raise ShapeError(
-            f"{name} must have the depth's shape {tuple(depth.shape)}; got {tuple(mask.shape)}. "
-            "Pass a (B,1,H,W) mask with 1 = measured, or None for depth > 0."
-        )
+    check_same_shape(mask, depth, name, "depth", "Pass a (B,1,H,W) mask with 1 = measured, or None for depth > 0.")
     # A pixel is only usable if it is measured *and* finite.
     return ((mask.to(depth.device) > 0) & torch.isfinite(depth)).to(depth.dtype)
 
@@ -65,10 +61,9 @@ def _resolve_mask(depth: torch.Tensor, mask: torch.Tensor | None, name: str = "m
 def _per_sample(value: float | torch.Tensor, batch: int, ref: torch.Tensor, name: str) -> torch.Tensor:
     """A float or a (B,) tensor as a (B,1,1,1) tensor of ``ref``'s dtype/device, checked > 0."""
     t = torch.as_tensor(value, dtype=ref.dtype, device=ref.device)
+    check_per_sample(t, name, batch)
     if t.ndim == 0:
         t = t.expand(batch)
-    if t.ndim != 1 or t.shape[0] not in (1, batch):
-        raise ShapeError(f"{name} must be a float or a (B,)=({batch},) tensor; got shape {tuple(t.shape)}.")
     if not bool((t > 0).all()):
         raise DepthSRError(f"{name} must be positive; got {t.tolist()}.")
     return t.expand(batch).reshape(batch, 1, 1, 1)
@@ -382,11 +377,9 @@ def joint_bilateral_filter(
         raise DepthSRError(f"kernel_size must be a positive odd int; got {kernel_size!r}.")
     if color_distance_type not in ("l1", "l2"):
         raise DepthSRError(f"color_distance_type must be 'l1' or 'l2'; got {color_distance_type!r}.")
-    h, w = depth.shape[-2:]
-    if kernel_size // 2 >= min(h, w):
-        largest = max(1, 2 * min(h, w) - 1)
-        raise ShapeError(f"depth is {h}x{w}, too small for kernel_size={kernel_size} (reflect padding needs "
-                         f"kernel_size // 2 < min(H, W)); use kernel_size <= {largest} or a larger image.")
+    largest = max(1, 2 * min(depth.shape[-2:]) - 1)
+    check_min_size(depth, "depth", kernel_size // 2 + 1, f"reflect padding for kernel_size={kernel_size} needs "
+                   f"kernel_size // 2 < min(H, W); use kernel_size <= {largest} or a larger image")
     if fill_passes < 0:
         raise DepthSRError(f"fill_passes must be >= 0; got {fill_passes}.")
     b = depth.shape[0]
@@ -517,14 +510,16 @@ def joint_bilateral_upsample(
     _check_rgb(rgb_hr, "rgb_hr")
     if depth_lr.shape[0] != rgb_hr.shape[0]:
         raise ShapeError(
-            f"depth_lr and rgb_hr must share the batch size; got {tuple(depth_lr.shape)} and {tuple(rgb_hr.shape)}."
+            f"depth_lr and rgb_hr must share the batch size; got {tuple(depth_lr.shape)} and {tuple(rgb_hr.shape)}.",
+            actual=tuple(rgb_hr.shape), expected=f"batch {depth_lr.shape[0]} like depth_lr",
         )
     h, w = depth_lr.shape[-2:]
     H, W = rgb_hr.shape[-2:]
     if H < h or W < w:
         raise ShapeError(
             f"rgb_hr {tuple(rgb_hr.shape)} must be at least as large as depth_lr {tuple(depth_lr.shape)}; "
-            "pass the high-resolution colour image."
+            "pass the high-resolution colour image.",
+            actual=tuple(rgb_hr.shape), expected=f"H >= {h}, W >= {w}",
         )
     if factor is not None and not factor > 0:
         raise DepthSRError(f"factor must be positive or None; got {factor!r}.")

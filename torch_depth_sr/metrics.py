@@ -18,6 +18,7 @@ from typing import Dict, Optional, Sequence, Union
 import numpy as np
 import torch
 
+from torch_depth_sr._checks import check_same_shape
 from torch_depth_sr.errors import DepthSRError, ShapeError
 
 ArrayLike = Union[torch.Tensor, np.ndarray]  # anything torch.as_tensor takes as a depth map or mask
@@ -25,22 +26,21 @@ ArrayLike = Union[torch.Tensor, np.ndarray]  # anything torch.as_tensor takes as
 
 def _prepare(pred, gt, mask):
     pred, gt = torch.as_tensor(pred), torch.as_tensor(gt)
-    if pred.shape != gt.shape:
-        raise ShapeError(f"pred has shape {tuple(pred.shape)} but gt has {tuple(gt.shape)}; they must match")
+    check_same_shape(pred, gt, "pred", "gt")
     unbatched = pred.dim() < 4
     if pred.dim() == 2:
         pred, gt = pred[None, None], gt[None, None]
     elif pred.dim() == 3:
         pred, gt = pred[None], gt[None]
     elif pred.dim() != 4:
-        raise ShapeError(f"pred must be (B,1,H,W), (1,H,W) or (H,W), got {tuple(pred.shape)}")
+        raise ShapeError(f"pred must be (B,1,H,W), (1,H,W) or (H,W), got {tuple(pred.shape)}",
+                         actual=tuple(pred.shape), expected="(B,1,H,W), (1,H,W) or (H,W)")
     if mask is None:
         m = torch.ones_like(gt, dtype=torch.float64)
     else:
         m = torch.as_tensor(mask, device=gt.device)
         m = m.reshape(gt.shape) if m.numel() == gt.numel() else m
-        if m.shape != gt.shape:
-            raise ShapeError(f"mask has shape {tuple(torch.as_tensor(mask).shape)}; expected {tuple(gt.shape)}")
+        check_same_shape(m, gt, "mask", "gt")
         m = (m > 0.5).to(torch.float64) if m.dtype != torch.bool else m.to(torch.float64)
     err = pred.to(torch.float64) - gt.to(torch.float64)
     err = torch.where(m > 0, err, torch.zeros_like(err))  # ignore nan/inf outside the mask
@@ -73,7 +73,8 @@ def bad_pixel_rate(pred: ArrayLike, gt: ArrayLike, mask: Optional[ArrayLike] = N
     thr = torch.as_tensor(threshold, dtype=torch.float64, device=err.device)
     if thr.dim() == 1:
         if thr.numel() != err.shape[0]:
-            raise ShapeError(f"threshold has {thr.numel()} values for a batch of {err.shape[0]}")
+            raise ShapeError(f"threshold has {thr.numel()} values for a batch of {err.shape[0]}",
+                             actual=tuple(thr.shape), expected=f"a float or ({err.shape[0]},)")
         thr = thr.view(-1, 1, 1, 1)
     return _reduce((err.abs() > thr).to(torch.float64), m, ub)
 
@@ -109,8 +110,7 @@ def evaluate(pred: ArrayLike, sample: dict, outlier_threshold: float = 3.0) -> D
     pred = torch.as_tensor(pred).to(gt.device)
     if pred.dim() == 4 and pred.shape[0] == 1:
         pred = pred[0]
-    if pred.shape != gt.shape:
-        raise ShapeError(f"pred has shape {tuple(pred.shape)} but sample['gt'] has {tuple(gt.shape)}")
+    check_same_shape(pred, gt, "pred", "sample['gt']")
     known = torch.as_tensor(sample["mask"]) > 0.5 if "mask" in sample else gt > 0
     thr = float(sample.get("scale", 1.0))
     out: Dict[str, float] = {

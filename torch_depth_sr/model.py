@@ -215,7 +215,8 @@ class DepthRestorer(nn.Module):
         bs = self.block_matcher.settings.block_size
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
-                             f"{bs}x{bs}, the block size used by block matching.")
+                             f"{bs}x{bs}, the block size used by block matching.", actual=tuple(y.shape),
+                             expected=f"output H, W >= {bs}")
         step = quantisation_step(y, observed, integer_input=integer_input)
         offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
         glitches = implausible(y, observed, scale)
@@ -368,7 +369,8 @@ def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Op
     h, w = y.shape[-2:]
     if rgb is None:
         if scale_factor not in (None, 1):
-            raise ShapeError("guided upsampling (scale_factor > 1) needs the high-resolution colour image.")
+            raise ShapeError("guided upsampling (scale_factor > 1) needs the high-resolution colour image.",
+                             actual=tuple(y.shape), expected=f"an rgb of size {h * scale_factor}x{w * scale_factor}")
         return 1
     hh, ww = rgb.shape[-2:]
     if scale_factor is None:
@@ -378,10 +380,12 @@ def _infer_factor(y: torch.Tensor, rgb: Optional[torch.Tensor], scale_factor: Op
             return hh // h
         raise ShapeError(f"depth is {h}x{w} and rgb is {hh}x{ww}; allowed are equal sizes (restoration) or rgb "
                          "an integer multiple s of depth in both dims (guided upsampling by s). "
-                         "Crop or resize so the sizes match.")
+                         "Crop or resize so the sizes match.", actual=tuple(rgb.shape),
+                         expected=f"rgb {h}x{w} or an integer multiple s of it")
     s = scale_factor
     if (hh, ww) != (h * s, w * s):
-        raise ShapeError(f"scale_factor={s} needs rgb of size {h * s}x{w * s} for depth {h}x{w}; got rgb {hh}x{ww}.")
+        raise ShapeError(f"scale_factor={s} needs rgb of size {h * s}x{w * s} for depth {h}x{w}; got rgb {hh}x{ww}.",
+                         actual=tuple(rgb.shape), expected=f"rgb {h * s}x{w * s}")
     return s
 
 

@@ -16,12 +16,13 @@ from typing import Optional, Tuple, Union
 
 import torch
 
-from ._checks import check_4d
+from ._checks import check_4d, check_same_shape
 from .block_matching import BlockMatches, gather_neighbors
-from .errors import ShapeError
 from .native import cpu_kernel
 
 __all__ = ["nonlocal_gradient", "nonlocal_terms", "nonlocal_value_prior"]
+
+_SAME_MATCHES = "Both are (B,k,H,W), from one block matching call."
 
 
 def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tensor:
@@ -47,9 +48,7 @@ def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tens
         torch.Size([1, 2, 16, 16])
     """
     check_4d(grad_x, "grad_x")
-    if matches.index.shape != matches.weight.shape:
-        raise ShapeError(f"matches.index {tuple(matches.index.shape)} and matches.weight "
-                         f"{tuple(matches.weight.shape)} must have the same shape (B,k,H,W).")
+    check_same_shape(matches.weight, matches.index, "matches.weight", "matches.index", _SAME_MATCHES)
     neigh = gather_neighbors(grad_x, matches.index)  # (B, C, k, H, W)
     w = matches.weight.to(grad_x.dtype).unsqueeze(1)  # (B, 1, k, H, W)
     return (w * neigh).sum(dim=2)  # (B, C, H, W)
@@ -161,9 +160,7 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
     check_4d(x, "x", channels=1)
     if grad_x is not None:
         check_4d(grad_x, "grad_x", channels=2)
-    if matches.index.shape != matches.weight.shape:
-        raise ShapeError(f"matches.index {tuple(matches.index.shape)} and matches.weight "
-                         f"{tuple(matches.weight.shape)} must have the same shape (B,k,H,W).")
+    check_same_shape(matches.weight, matches.index, "matches.weight", "matches.index", _SAME_MATCHES)
     value = value_weight > 0
     if grad_x is None and not value:
         return None, None, None

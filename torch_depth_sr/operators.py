@@ -22,7 +22,7 @@ from typing import Sequence
 import torch
 import torch.nn.functional as F
 
-from ._checks import check_4d, check_floating
+from ._checks import check_4d, check_divisible, check_floating
 from .errors import DepthSRError, ShapeError
 
 __all__ = [
@@ -113,7 +113,7 @@ def grad_adjoint(p: torch.Tensor) -> torch.Tensor:
     if p.shape[1] % 2 != 0:
         raise ShapeError(
             f"p must have an even number of channels (B,2C,H,W): C horizontal then C vertical differences, "
-            f"as returned by grad(); got shape {tuple(p.shape)}."
+            f"as returned by grad(); got shape {tuple(p.shape)}.", actual=tuple(p.shape), expected="(B,2C,H,W)"
         )
     return _grad_adjoint(p)
 
@@ -181,12 +181,7 @@ def area_downsample(x: torch.Tensor, s: int) -> torch.Tensor:
     check_4d(x, "x")
     check_floating(x, "x")
     s = _check_factor(s)
-    h, w = x.shape[-2:]
-    if h % s or w % s:
-        raise ShapeError(
-            f"area_downsample needs H and W divisible by s={s}; got x of shape {tuple(x.shape)}. "
-            f"Pad or crop the high-resolution grid to a multiple of s first."
-        )
+    check_divisible(x, "x", s, "area_downsample")
     if s == 1:
         return x.clone()
     return F.avg_pool2d(x, kernel_size=s, stride=s)  # (B, C, H/s, W/s)
@@ -393,9 +388,8 @@ class BicubicDownsample(Degradation):
         return _bicubic_matrix(n, self.s, torch.device(device), dtype)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        check_divisible(x, "x", self.s, f"BicubicDownsample(s={self.s})")
         h, w = x.shape[-2:]
-        if h % self.s or w % self.s:
-            raise ShapeError(f"BicubicDownsample(s={self.s}) needs H and W divisible by {self.s}; got {h}x{w}.")
         a_h, a_w = self._matrix(h, x.device, x.dtype), self._matrix(w, x.device, x.dtype)
         return a_h @ x @ a_w.T
 
@@ -468,10 +462,12 @@ def dot_test(
     au = op.forward(u)
     atv = op.adjoint(v)
     if tuple(au.shape) != tuple(y_shape):
-        raise ShapeError(f"{op!r}.forward maps {tuple(x_shape)} to {tuple(au.shape)}, not to y_shape {tuple(y_shape)}.")
+        raise ShapeError(f"{op!r}.forward maps {tuple(x_shape)} to {tuple(au.shape)}, not to y_shape {tuple(y_shape)}.",
+                         actual=tuple(au.shape), expected=str(tuple(y_shape)))
     if tuple(atv.shape) != tuple(x_shape):
         raise ShapeError(
-            f"{op!r}.adjoint maps {tuple(y_shape)} to {tuple(atv.shape)}, not to x_shape {tuple(x_shape)}."
+            f"{op!r}.adjoint maps {tuple(y_shape)} to {tuple(atv.shape)}, not to x_shape {tuple(x_shape)}.",
+            actual=tuple(atv.shape), expected=str(tuple(x_shape)),
         )
     lhs = (au * v).sum().item()
     rhs = (u * atv).sum().item()

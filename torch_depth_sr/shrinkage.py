@@ -38,7 +38,8 @@ def _as_threshold(t: float | torch.Tensor, v: torch.Tensor, name: str = "t") -> 
             raise ShapeError(
                 f"threshold {name} of shape {tuple(t.shape)} does not broadcast against v of shape "
                 f"{tuple(v.shape)}; use a float, a 0-d tensor, a per-sample (B,) tensor with B={v.shape[0]}, "
-                f"or a tensor broadcastable to v."
+                f"or a tensor broadcastable to v.",
+                actual=tuple(t.shape), expected=f"(), ({v.shape[0]},) or broadcastable to {tuple(v.shape)}",
             ) from None
         return t.to(dtype=v.dtype) if t.is_floating_point() and t.dtype != v.dtype else t
     if isinstance(t, bool) or not isinstance(t, (int, float)):
@@ -96,7 +97,8 @@ def group_soft_threshold(v: torch.Tensor, t: float | torch.Tensor, dim: int = 1)
     if not isinstance(v, torch.Tensor):
         raise DepthSRError(f"v must be a torch.Tensor; got {type(v).__name__}.")
     if not -v.ndim <= dim < v.ndim:
-        raise ShapeError(f"dim={dim} is out of range for v of shape {tuple(v.shape)}.")
+        raise ShapeError(f"dim={dim} is out of range for v of shape {tuple(v.shape)}.", actual=tuple(v.shape),
+                         expected=f"at least {dim + 1 if dim >= 0 else -dim} dims for dim={dim}")
     t = _as_threshold(t, v)
     sumsq = (v * v).sum(dim=dim, keepdim=True)  # (B, 1, H, W) for dim=1
     active = sumsq > t * t  # the norm is only evaluated where ‖v‖ > t
@@ -141,7 +143,8 @@ class SoftThreshold(nn.Module):
             t = t.to(torch.get_default_dtype())
         if t.ndim > 1:
             raise ShapeError(
-                f"threshold must be a float, a 0-d tensor or a per-sample 1-D (B,) tensor; got shape {tuple(t.shape)}."
+                f"threshold must be a float, a 0-d tensor or a per-sample 1-D (B,) tensor; got shape {tuple(t.shape)}.",
+                actual=tuple(t.shape), expected="() or (B,)",
             )
         if not torch.isfinite(t).all() or (t < 0).any():
             raise DepthSRError(f"threshold must be finite and >= 0; got {threshold!r}.")
@@ -176,7 +179,8 @@ class SoftThreshold(nn.Module):
         if t.ndim == 1 and t.shape[0] != 1 and (v.ndim < 1 or t.shape[0] != v.shape[0]):
             raise ShapeError(
                 f"this SoftThreshold holds a per-sample threshold of length {t.shape[0]}, but v has shape "
-                f"{tuple(v.shape)}; pass a batch of {t.shape[0]} samples or build the module with a scalar threshold."
+                f"{tuple(v.shape)}; pass a batch of {t.shape[0]} samples or build the module with a scalar threshold.",
+                actual=tuple(v.shape), expected=f"({t.shape[0]}, ...)",
             )
         if scale is not None:
             t = t * torch.as_tensor(scale, dtype=t.dtype, device=t.device)  # () or (B,)

@@ -26,9 +26,9 @@ from typing import Tuple, Union
 
 import torch
 
-from ._checks import check_4d, check_same_hw
+from ._checks import check_4d, check_per_sample, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
-from .errors import DepthSRError, ShapeError
+from .errors import DepthSRError
 from .native import cpu_kernel
 
 __all__ = ["detect_singular", "neighbour_support", "line_support"]
@@ -40,8 +40,7 @@ def _as_batch(value, name: str, b: int, like: torch.Tensor) -> torch.Tensor:
     A float is checked on the host; a tensor's check reads it (one host synchronisation on a GPU).
     """
     if isinstance(value, torch.Tensor):
-        if value.numel() not in (1, b) or value.ndim > 1:
-            raise ShapeError(f"{name} must be a float or a ({b},) tensor; got shape {tuple(value.shape)}.")
+        check_per_sample(value, name, b)
         v = value.detach().to(like).reshape(-1).expand(b) if value.numel() == 1 else value.detach().to(like)
         if bool((~torch.isfinite(v) | (v <= 0)).any()):
             raise DepthSRError(f"{name} must be finite and > 0; got {v.tolist()}.")
@@ -225,9 +224,7 @@ def detect_singular(
     check_4d(observed, "observed", channels=1)
     check_same_hw(y, x, "y", "x")
     check_same_hw(y, observed, "y", "observed")
-    if matches.index.shape[0] != y.shape[0] or matches.index.shape[-2:] != y.shape[-2:]:
-        raise ShapeError(f"matches {tuple(matches.index.shape)} must share batch size and height/width with "
-                         f"y {tuple(y.shape)}; run block matching on this image.")
+    check_same_hw(y, matches.index, "y", "matches", "Run block matching on this image.")
     if not 0.0 < float(tau) <= 1.0:
         raise DepthSRError(f"tau must be in (0, 1]; got {tau!r}.")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:

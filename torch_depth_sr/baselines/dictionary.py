@@ -15,7 +15,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
-from .._checks import check_4d
+from .._checks import check_4d, check_min_size, check_same_hw, check_same_shape
 from ..errors import DepthSRError, ShapeError
 from ..noise import estimate_noise_sigma as _estimate_noise_sigma
 from .jbf import _check_depth, _check_rgb, _pull_push_fill, _resolve_mask
@@ -86,14 +86,16 @@ def batched_omp(
         ([2.0, -1.0], 2)
     """
     if not isinstance(D, torch.Tensor) or D.ndim != 2:
-        raise ShapeError(f"D must be a (F, K) tensor; got {getattr(D, 'shape', type(D))}.")
+        raise ShapeError(f"D must be a (F, K) tensor; got {getattr(D, 'shape', type(D))}.",
+                         actual=tuple(D.shape) if hasattr(D, "shape") else None, expected="(F, K)")
     if not isinstance(X, torch.Tensor) or X.ndim != 2 or X.shape[1] != D.shape[0]:
         raise ShapeError(
             f"X must be (N, F) with F = D.shape[0] = {D.shape[0]}; got {tuple(getattr(X, 'shape', ()))}. "
-            "Put one signal per row."
+            "Put one signal per row.",
+            actual=tuple(X.shape) if hasattr(X, "shape") else None, expected=f"(N, {D.shape[0]})",
         )
-    if mask is not None and tuple(mask.shape) != tuple(X.shape):
-        raise ShapeError(f"mask must have X's shape {tuple(X.shape)}; got {tuple(mask.shape)}.")
+    if mask is not None:
+        check_same_shape(mask, X, "mask", "X")
     if not isinstance(n_nonzero, int) or n_nonzero < 1:
         raise DepthSRError(f"n_nonzero must be an int >= 1; got {n_nonzero!r}.")
     n, f = X.shape
@@ -435,10 +437,7 @@ def dictionary_denoise(
     _check_depth(depth)
     if rgb is not None:
         _check_rgb(rgb)
-        if rgb.shape[0] != depth.shape[0] or rgb.shape[-2:] != depth.shape[-2:]:
-            raise ShapeError(
-                f"rgb {tuple(rgb.shape)} must match depth {tuple(depth.shape)} in batch size and height/width."
-            )
+        check_same_hw(depth, rgb, "depth", "rgb")
     for name, v, lo in [("patch_size", patch_size, 2), ("n_atoms", n_atoms, 1), ("sparsity", sparsity, 1),
                         ("stride", stride, 1), ("n_iter", n_iter, 0), ("n_train", n_train, 1),
                         ("chunk_size", chunk_size, 1)]:
@@ -450,12 +449,7 @@ def dictionary_denoise(
         raise DepthSRError(f"error_gain must be positive or None; got {error_gain!r}.")
     if data_weight < 0:
         raise DepthSRError(f"data_weight must be >= 0; got {data_weight!r}.")
-    H, W = depth.shape[-2:]
-    if H < patch_size or W < patch_size:
-        raise ShapeError(
-            f"depth is {H}x{W}; it must be at least patch_size x patch_size = {patch_size}x{patch_size}. "
-            "Use a smaller patch_size."
-        )
+    check_min_size(depth, "depth", patch_size, "patch_size x patch_size; use a smaller patch_size")
     b = depth.shape[0]
     m = _resolve_mask(depth, mask)
     if sigma is None:
@@ -465,7 +459,8 @@ def dictionary_denoise(
         if sig.ndim == 0:
             sig = sig.expand(b)
         if sig.ndim != 1 or sig.shape[0] != b:
-            raise ShapeError(f"sigma must be a float, None, or a (B,)=({b},) tensor; got shape {tuple(sig.shape)}.")
+            raise ShapeError(f"sigma must be a float, None, or a (B,)=({b},) tensor; got shape {tuple(sig.shape)}.",
+                             actual=tuple(sig.shape), expected=f"() or ({b},)")
         if bool((sig < 0).any()):
             raise DepthSRError(f"sigma must be >= 0; got {sig.tolist()}.")
     outs, covered = [], []

@@ -35,8 +35,8 @@ from typing import Optional
 
 import torch
 
-from .._checks import check_4d
-from ..errors import DepthSRError, ShapeError
+from .._checks import check_4d, check_same_hw
+from ..errors import DepthSRError
 from ._common import BlockMatches, Scalar, finish, prepare
 from ..native import cpu_kernel
 from .reference import block_match_reference
@@ -155,9 +155,7 @@ def gather_neighbors(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     check_4d(index, "index")
     if index.dtype != torch.int64:
         raise DepthSRError(f"index must be int64 (from BlockMatches.index); got {index.dtype}.")
-    if index.shape[0] != values.shape[0] or index.shape[-2:] != values.shape[-2:]:
-        raise ShapeError(f"values {tuple(values.shape)} and index {tuple(index.shape)} must share batch size "
-                         f"and height/width.")
+    check_same_hw(values, index, "values", "index", "Gather with the matches of an image of the values' size.")
     b, c, h, w = values.shape
     k = index.shape[1]
     flat = values.reshape(b, c, h * w)  # (B, C, HW)

@@ -6,7 +6,7 @@ from typing import NamedTuple, Optional, Union
 import numpy as np
 import torch
 
-from .._checks import check_4d, check_floating, check_same_hw
+from .._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw
 from ..errors import DepthSRError, ShapeError
 
 __all__ = ["BlockMatches", "lattice", "prepare", "finish", "index_from_offsets", "offset_order", "symmetric_order"]
@@ -47,9 +47,7 @@ def _min_valid_offsets(size: int, radius: int, stride: int) -> int:
 def _per_sample(value: Scalar, name: str, batch: int, positive: bool) -> torch.Tensor:
     """A float or (B,)/(1,)/() tensor as a (B,) tensor; checks the sign."""
     if isinstance(value, torch.Tensor):
-        if value.ndim > 1 or (value.ndim == 1 and value.numel() not in (1, batch)):
-            raise ShapeError(f"{name} must be a float or a tensor of shape ({batch},) or (); got shape "
-                             f"{tuple(value.shape)}.")
+        check_per_sample(value, name, batch)
         v = value.reshape(-1).expand(batch) if value.numel() == 1 else value.reshape(batch)
     else:
         try:
@@ -70,7 +68,8 @@ def _validate(depth, rgb, trust, block_size, search_window, k, search_stride):
     if rgb is not None:
         check_4d(rgb, "rgb")
         if rgb.shape[1] < 1:
-            raise ShapeError(f"rgb must have at least one channel; got shape {tuple(rgb.shape)}.")
+            raise ShapeError(f"rgb must have at least one channel; got shape {tuple(rgb.shape)}.",
+                             actual=tuple(rgb.shape), expected="(B,C,H,W) with C >= 1")
         check_same_hw(depth, rgb, "depth", "rgb")
     if trust is not None:
         check_4d(trust, "trust", channels=1)
@@ -83,10 +82,7 @@ def _validate(depth, rgb, trust, block_size, search_window, k, search_stride):
         raise DepthSRError(f"search_stride must be an int >= 1; got {search_stride!r}.")
     if isinstance(k, bool) or not isinstance(k, int) or k < 1:
         raise DepthSRError(f"k must be an int >= 1; got {k!r}.")
-    _, _, h, w = depth.shape
-    if h < block_size or w < block_size:
-        raise ShapeError(f"depth is {h}x{w}, smaller than one {block_size}x{block_size} block; "
-                         f"the image must be at least {block_size}x{block_size}. Use a smaller block_size.")
+    check_min_size(depth, "depth", block_size, f"one {block_size}x{block_size} block; use a smaller block_size")
 
 
 def _check_k(k, h, w, search_window, search_stride, include_self):

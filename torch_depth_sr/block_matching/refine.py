@@ -13,6 +13,7 @@ from typing import Optional
 
 import torch
 
+from .._checks import check_same_hw
 from ..errors import DepthSRError, ShapeError
 from ._common import BlockMatches, Scalar, finish, prepare
 from ..native import cpu_kernel
@@ -58,10 +59,12 @@ def refine_matches(
                         include_self, 1)
     if not isinstance(previous, BlockMatches):
         raise DepthSRError(f"previous must be BlockMatches (from block_match); got {type(previous).__name__}.")
-    if previous.index.shape[0] != depth.shape[0] or previous.index.shape[-2:] != depth.shape[-2:] \
-            or previous.index.shape[1] < k:
+    check_same_hw(depth, previous.index, "depth", "previous matches",
+                  "Pass the matches block_match returned for this depth map.")
+    if previous.index.shape[1] < k:
         raise ShapeError(f"previous matches {tuple(previous.index.shape)} must be (B, >= k, H, W) for depth "
-                         f"{tuple(depth.shape)} and k={k}.")
+                         f"{tuple(depth.shape)} and k={k}.", actual=tuple(previous.index.shape),
+                         expected=f"(B, >= {k}, H, W)")
     if isinstance(reach, bool) or not isinstance(reach, int) or reach < 0:
         raise DepthSRError(f"reach must be an int >= 0; got {reach!r}.")
     refine_cpu = cpu_kernel("block_matching.refine_cpu", "refine_cpu") if depth.device.type == "cpu" else None

@@ -24,6 +24,7 @@ from typing import Callable, NamedTuple, Optional
 
 import torch
 
+from .._checks import check_same_shape
 from ..errors import DepthSRError, ShapeError
 
 __all__ = ["CGResult", "conjugate_gradient"]
@@ -61,16 +62,14 @@ def _check_inputs(b: torch.Tensor, x0: torch.Tensor | None, tol: float, max_iter
     if not isinstance(b, torch.Tensor):
         raise DepthSRError(f"b must be a torch.Tensor; got {type(b).__name__}.")
     if b.ndim < 1:
-        raise ShapeError("b must have a leading batch dimension, e.g. (B,C,H,W); got a 0-d tensor.")
+        raise ShapeError("b must have a leading batch dimension, e.g. (B,C,H,W); got a 0-d tensor.", actual=(),
+                         expected="(B, ...), e.g. (B,C,H,W)")
     if not b.is_floating_point():
         raise DepthSRError(f"b must be a floating tensor (float32/float64); got {b.dtype}.")
     if x0 is not None:
         if not isinstance(x0, torch.Tensor):
             raise DepthSRError(f"x0 must be a torch.Tensor or None; got {type(x0).__name__}.")
-        if x0.shape != b.shape:
-            raise ShapeError(
-                f"x0 must have the shape of b {tuple(b.shape)}; got {tuple(x0.shape)}. Pass x0=None for a zero start."
-            )
+        check_same_shape(x0, b, "x0", "b", "Pass x0=None for a zero start.")
     if isinstance(max_iter, bool) or not isinstance(max_iter, int) or max_iter < 0:
         raise DepthSRError(f"max_iter must be an int >= 0; got {max_iter!r}.")
     if not (float(tol) >= 0):
@@ -81,7 +80,8 @@ def _apply(fn: Operator, v: torch.Tensor, name: str) -> torch.Tensor:
     out = fn(v)
     if not isinstance(out, torch.Tensor) or out.shape != v.shape:
         got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
-        raise ShapeError(f"{name} must map a tensor of shape {tuple(v.shape)} to the same shape; got {got}.")
+        raise ShapeError(f"{name} must map a tensor of shape {tuple(v.shape)} to the same shape; got {got}.",
+                         actual=got if isinstance(got, tuple) else None, expected=str(tuple(v.shape)))
     return out
 
 

@@ -30,7 +30,7 @@ from functools import lru_cache
 
 import torch
 
-from .._checks import check_4d, check_floating
+from .._checks import check_4d, check_floating, check_per_sample
 from ..errors import DepthSRError, ShapeError
 
 __all__ = ["NeumannPreconditioner", "dct2", "dct_matrix", "idct2", "neumann_eigenvalues", "solve_neumann"]
@@ -134,7 +134,8 @@ def _check_image(x: torch.Tensor, name: str) -> None:
     if not isinstance(x, torch.Tensor):
         raise DepthSRError(f"{name} must be a torch.Tensor; got {type(x).__name__}.")
     if x.ndim < 2:
-        raise ShapeError(f"{name} must have at least 2 dims (..., H, W), e.g. (B,C,H,W); got shape {tuple(x.shape)}.")
+        raise ShapeError(f"{name} must have at least 2 dims (..., H, W), e.g. (B,C,H,W); got shape {tuple(x.shape)}.",
+                         actual=tuple(x.shape), expected="(..., H, W)")
     check_floating(x, name)
 
 
@@ -179,14 +180,10 @@ def _as_coefficient(v: float | torch.Tensor, b: torch.Tensor, name: str, positiv
     """A float or a 0-d / per-sample (B,) tensor, shaped (B,1,1,1) to broadcast against b."""
     bound = "> 0" if positive else ">= 0"
     if isinstance(v, torch.Tensor):
+        check_per_sample(v, name, b.shape[0])
         if v.ndim == 0:
             return v.to(dtype=b.dtype, device=b.device)
-        if v.ndim == 1 and v.shape[0] in (1, b.shape[0]):
-            return v.to(dtype=b.dtype, device=b.device).view((-1,) + (1,) * (b.ndim - 1))  # (B, 1, 1, 1)
-        raise ShapeError(
-            f"{name} must be a float, a 0-d tensor or a per-sample (B,) tensor with B={b.shape[0]}; "
-            f"got a tensor of shape {tuple(v.shape)}."
-        )
+        return v.to(dtype=b.dtype, device=b.device).view((-1,) + (1,) * (b.ndim - 1))  # (B, 1, 1, 1)
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise DepthSRError(f"{name} must be a float {bound} or a tensor; got {type(v).__name__}.")
     v = float(v)
