@@ -43,8 +43,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from ._checks import check_divisible
 from ._inputs import native_array
-from .errors import DepthSRError, DTypeError
+from .errors import DepthSRError, DTypeError, ShapeError
 
 if TYPE_CHECKING:
     from .config import RestorerConfig
@@ -113,7 +114,8 @@ def _depth_float(d) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, bool]:
     """-> (float depth with missing = 0, measured mask (bool), original tensor, was_numpy)."""
     t, was_np = _as_torch(d)
     if t.dim() < 2:
-        raise DepthSRError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.")
+        raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.",
+                         actual=tuple(t.shape), expected="(H,W), (1,H,W) or (B,1,H,W)")
     if t.dtype == torch.bool or t.is_complex():  # a bool map is a mask, not a depth (nothing to degrade)
         raise DTypeError(f"depth has dtype {t.dtype}; allowed are float, unsigned or signed integer depth. A bool "
                          "map is a validity mask: pass it as sample['mask'] next to the depth.")
@@ -415,15 +417,12 @@ class Downsample(_DepthTransform):
 
     def _degrade(self, f, measured, p):
         s = self.factor
-        h, w = f.shape[-2:]
-        if h % s or w % s:
-            raise DepthSRError(f"Downsample(factor={s}) needs H and W divisible by {s}; got {h}x{w}. "
-                               f"Crop to a multiple of {s} first (RandomCrop).")
+        check_divisible(f, "depth", s, f"Downsample(factor={s}) (crop first: RandomCrop)")
         x, shape = _as4d(f)
         m, _ = _as4d(measured.to(f.dtype))
         num, den = F.avg_pool2d(x * m, s), F.avg_pool2d(m, s)
         out = torch.where(den > 0, num / den.clamp_min(1e-12), torch.zeros_like(num))
-        return out.reshape(*shape[:-2], h // s, w // s)
+        return out.reshape(*shape[:-2], *out.shape[-2:])
 
 
 class RandomCrop(Transform):

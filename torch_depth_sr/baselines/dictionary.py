@@ -15,7 +15,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
-from .._checks import check_4d, check_min_size, check_same_hw, check_same_shape
+from .._checks import check_min_size, check_same_hw, check_same_shape
 from ..errors import DepthSRError, ShapeError
 from ..noise import estimate_noise_sigma as _estimate_noise_sigma
 from .jbf import _check_depth, _check_rgb, _pull_push_fill, _resolve_mask
