@@ -71,7 +71,7 @@ def test_layer_is_one_hand_written_hqs_step(use_nonlocal, use_outliers):
     state = RestorationState(x=x, z=zeros2, w=zeros2, e=torch.zeros_like(y), alpha=alpha_old, q=q, confidence=q,
                              matches=matches)
     ctx = RestorationContext(y=y, observed=torch.ones_like(y), rgb=None, K=Identity(),
-                             block_matcher=BlockMatcher(cfg.block_matching, 0.5, 400.0))
+                             block_matcher=BlockMatcher(cfg.block_matching))
     out = layer(state, ctx)
 
     p = {n: float(layer.value(n)) for n in layer.names}

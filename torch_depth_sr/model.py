@@ -112,7 +112,7 @@ class DepthRestorer(nn.Module):
         # one block matcher, owning the temperature h (learns) and the colour weight ρ (a buffer); x⁰'s matches and
         # every scheduled layer's go through it. Built after the layers so that the parameters keep their order
         # (the optimiser's state in a training checkpoint is kept by position).
-        self.block_matcher = BlockMatcher(config.block_matching, config.temperature, config.color_weight, trainable)
+        self.block_matcher = BlockMatcher(config.block_matching, trainable)
         # per-pixel multipliers of the layers' thresholds (issue 14); None = the scalar model (no state-dict keys)
         self.guidance: Optional[GuidanceNet] = None
         if config.guidance_net:

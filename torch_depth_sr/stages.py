@@ -131,19 +131,18 @@ def solve_x(ctx: RestorationContext, q: torch.Tensor, mu: torch.Tensor, rhs: tor
 class BlockMatcher(nn.Module):
     """Block matching of the current estimate (:func:`run_block_matching`) with its
     :class:`~torch_depth_sr.config.BlockMatchingConfig` ``settings`` (block size, search window, k, the layers that
-    match again, :meth:`scheduled`, and how) and its two numbers: the weight temperature ``h``, a parameter
-    (``log_temperature``; learns when ``trainable``: the weights ``softmax(−d/h)`` are differentiable in it), and
-    the colour weight ``ρ`` of the block distance, a buffer (``log_color_weight``: ρ only picks the matches, a
-    discrete choice with no gradient). The model builds one and every layer matches through it
+    match again, :meth:`scheduled`, and how) and its two numbers, initialised from the settings: the weight
+    temperature ``h``, a parameter (``log_temperature``; learns when ``trainable``: the weights ``softmax(−d/h)``
+    are differentiable in it), and the colour weight ``ρ`` of the block distance, a buffer (``log_color_weight``:
+    ρ only picks the matches, a discrete choice with no gradient). The model builds one and every layer matches through it
     (``ctx.block_matcher``). Times itself as the stage ``"block_matching"``.
     """
 
-    def __init__(self, settings: BlockMatchingConfig, temperature: float, color_weight: float,
-                 trainable: bool = False):
+    def __init__(self, settings: BlockMatchingConfig, trainable: bool = False):
         super().__init__()
-        self.settings = settings
-        self.log_temperature = nn.Parameter(torch.tensor(float(temperature)).log(), requires_grad=trainable)
-        self.register_buffer("log_color_weight", torch.tensor(max(float(color_weight), 1e-8)).log())
+        self.settings = settings  # its temperature and color_weight are the initial h and ρ
+        self.log_temperature = nn.Parameter(torch.tensor(float(settings.temperature)).log(), requires_grad=trainable)
+        self.register_buffer("log_color_weight", torch.tensor(max(float(settings.color_weight), 1e-8)).log())
 
     @property
     def temperature(self) -> torch.Tensor:
