@@ -122,10 +122,9 @@ def test_clean_synthetic_upsampling_is_not_worse_than_bicubic():
 def test_clean_middlebury_upsampling_is_not_worse_than_bicubic():
     """×4 on five 2006 images of the guided-SR test set (the fitting split). Issue 12: 2.386 vs bicubic 1.865;
     with the zeroth-order JBU x⁰ in a noise band 0.988 of bicubic's mean RMSE, worst image 1.158 (Cloth1); with the
-    first-order JBU, its edge band and consistency check 0.895, worst 1.099.
-
-    Not every image: on Cloth1's fine ripples the model stays 10 % behind bicubic (README), so the
-    test bounds the mean and the worst image.
+    first-order JBU, its edge band and consistency check 0.895, worst 1.099 (Cloth1, whose fine ripples the model
+    took for noise); with the output held to x⁰ within the white-noise band (``upsample_output_band``) every image,
+    Cloth1 0.733 vs bicubic 0.749 (0.823 before).
     """
     from torch_depth_sr.evaluation.clean_upsampling import images, rmse_grey
 
@@ -138,7 +137,7 @@ def test_clean_middlebury_upsampling_is_not_worse_than_bicubic():
         ours.append(rmse_grey(restore_depth(lr, guide), gt))
         theirs.append(rmse_grey(bicubic, gt))
     assert np.mean(ours) <= 0.95 * np.mean(theirs), (ours, theirs)
-    assert max(o / t for o, t in zip(ours, theirs)) < 1.15, (ours, theirs)
+    assert all(o <= t for o, t in zip(ours, theirs)), (ours, theirs)
 
 
 def test_a_one_pixel_gap_at_the_image_border_is_not_turned_into_a_phantom_surface():

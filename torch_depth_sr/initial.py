@@ -133,6 +133,7 @@ class Initializer(nn.Module):
             q, conf = singular_detector(ctx, guided, ctx.block_matcher(guided, ctx, observed))
             x0 = self.observation_grid(y, observed, guided, trusted=q)
         if not K.is_identity:  # x⁰ to the output grid
+            ctx.lowres = x0  # kept for the do-no-harm hold of the output (upsampling.hold_to_initial)
             x0 = self.output_grid(x0, observed, guide, K, noise=noise)
         elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
             ctx.prior = guided

@@ -29,11 +29,11 @@ from .fidelity import clamp_to_measurements, noise_band
 from .guidance import GuidanceNet
 from .initial import Initializer, initial_estimate
 from .layers import UnrolledLayer
-from .noise import depth_scale, implausible, quantisation_step
+from .noise import depth_scale, implausible, quantisation_step, white_noise_sigma
 from .operators import degradation_operator
 from .stages import BlockMatcher, SingularDetector
 from .state import RestorationContext, RunLog
-from .upsampling import upsample_initial
+from .upsampling import hold_to_initial, upsample_initial
 
 __all__ = [
     "RestorationResult",
@@ -246,6 +246,10 @@ class DepthRestorer(nn.Module):
         if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
             band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)
+        elif not K.is_identity and self.initializer.upsampling.output_band > 0:  # do no harm on clean input
+            white = sigma if noise_sigma is not None else white_noise_sigma(y, observed)
+            x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
+                                white.to(sigma) / scale)
         x = x * s4 + o4
         if fill == "trusted":
             x = _leave_unconfident_missing(x, ctx, observed)

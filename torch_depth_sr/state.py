@@ -91,6 +91,7 @@ class RestorationContext:
     block_matcher: "Matcher"
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate that untrusted pixels are pulled to (K = I)
     grid_step: Optional[torch.Tensor] = None  # (B,) quantisation step of y in its normalised units (0 = none)
+    lowres: Optional[torch.Tensor] = None  # (B,1,h,w) the filled estimate x⁰ was upsampled from (K ≠ I)
     fill_confident: Optional[torch.Tensor] = None  # (B,1,h,w) {0,1}: measured, or a hole filled from a clear side
     # (B,1,h,w) bool: measured pixels with enough agreeing measured neighbours (SingularConfig.support), which
     # the singular test always trusts; depends on y only, so the first test computes it (supported_pixels)
