@@ -99,7 +99,6 @@ def white_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, patch: int = 
         True
     """
     sd = estimate_noise_sigma(depth, observed)
-    out = sd.clone()
     d = depth.detach().double()
     m = (observed > 0).to(d.dtype)
     dh = torch.zeros_like(d)
@@ -108,20 +107,21 @@ def white_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, patch: int = 
     dv[..., 1:-1, :] = (d[..., :-2, :] - 2 * d[..., 1:-1, :] + d[..., 2:, :]).abs()
     dmax = torch.nn.functional.max_pool2d(torch.maximum(dh, dv), patch, stride=1)
     complete = torch.nn.functional.avg_pool2d(m, patch, stride=1) > 1 - 1e-9
-    patches = torch.nn.functional.unfold(torch.where(m > 0, d, torch.zeros_like(d)), patch)  # (B, p², N)
+    sd4 = sd.to(d).view(-1, 1, 1, 1)
+    # the patches used, as weights (no boolean indexing: batched, and the host never waits for the device)
+    use = (complete & (dmax <= 4 * 6**0.5 * sd4)).flatten(1).to(d.dtype)  # (B, N)
+    patches = torch.nn.functional.unfold(d * m, patch)  # (B, p², N)
+    q = patches - patches.mean(1, keepdim=True)  # each patch's own mean removed
+    n = use.sum(1)  # (B,)
+    k = patch * patch
+    cov = torch.einsum("bkn,bln,bn->bkl", q, q, use) / n.clamp_min(1).view(-1, 1, 1)
+    ev = torch.linalg.eigvalsh(cov)  # ascending; ev[:, 0] ≈ 0: the removed patch mean
+    sp2 = ev[:, 1].clamp_min(0) / (1 - (k / n.clamp_min(k + 1)).sqrt()) ** 2  # Marchenko-Pastur correction
     ratio = _WHITE_RATIO_CLEAN
-    for i in range(depth.shape[0]):
-        keep = (complete[i] & (dmax[i] <= 4 * 6**0.5 * float(sd[i]))).flatten()
-        q = patches[i][:, keep].T
-        n, k = q.shape[0], patch * patch
-        if n < 2 * k or float(sd[i]) <= 0:
-            continue
-        q = q - q.mean(1, keepdim=True)
-        ev = torch.linalg.eigvalsh(q.T @ q / n)
-        sp2 = float(ev[1].clamp_min(0)) / (1 - (k / n) ** 0.5) ** 2  # ev[0] ≈ 0: the removed patch mean
-        out[i] = max(sp2 - ratio**2 * float(sd[i]) ** 2, 0.0) / (1 - ratio**2)
-        out[i] = out[i].sqrt()
-    return out
+    sdd = sd.to(d)
+    white = ((sp2 - ratio**2 * sdd**2).clamp_min(0) / (1 - ratio**2)).sqrt()
+    enough = (n >= 2 * k) & (sdd > 0)  # too few complete patches: the second differences' estimate
+    return torch.where(enough, white, sdd).to(sd.dtype)
 
 
 def _haar_sigma(depth: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
