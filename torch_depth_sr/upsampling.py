@@ -1,4 +1,4 @@
-"""The initial estimate x⁰ of guided upsampling, on the output grid.
+"""The initial estimate x⁰ of guided upsampling, on the output grid, and the do-no-harm hold of the output to it.
 
 Joint bilateral upsampling (Kopf et al. 2007) of the low-resolution estimate, first order (each tap extrapolated
 along its limited slope, :func:`~torch_depth_sr.guided_filters.joint_bilateral_upsample`), held in a band around
@@ -9,6 +9,10 @@ back in place. So the band is ``init_band`` noise σ everywhere plus ``init_edge
 evidence :func:`plane_residual` of the low-resolution input. Where the colour image puts an edge somewhere the data
 do not (printed patterns on cloth, shadows), the filtered estimate, degraded by ``K``, no longer reproduces the
 input: there the edge band is refused (``init_consistency``).
+
+After the layers, :func:`hold_to_initial` keeps the output within a band of x⁰ rebuilt with the *white* noise level
+(:func:`~torch_depth_sr.noise.white_noise_sigma`): 0 on a clean map, whose fine texture the layers would otherwise
+smooth as noise.
 
 On the eleven Middlebury 2006 images of the guided-SR test set, ×4 (``python -m
 torch_depth_sr.evaluation.clean_upsampling --sets Middlebury --images 03 04 05 09 10 11 12 19 20 28 29``), the
