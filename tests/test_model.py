@@ -263,3 +263,14 @@ def test_k_is_limited_to_the_candidates_every_pixel_has():
     out = DepthRestorer(num_layers=2)(y, torch.rand(1, 3, 6, 6, generator=g))
     assert out.shape == y.shape and bool(torch.isfinite(out).all())
     assert DepthRestorer.preset("fast", num_layers=1)(y, None).shape == y.shape
+
+
+def test_guided_upsampling_matches_with_its_own_window_and_k():
+    from torch_depth_sr import RestorerConfig
+    from torch_depth_sr.config import PRESETS
+
+    bm = RestorerConfig().block_matching
+    assert bm.window_and_k(upsampling=False) == (15, 40) and bm.window_and_k(upsampling=True) == (21, 10)
+    assert RestorerConfig(**PRESETS["fast"]).block_matching.window_and_k(upsampling=True) == (11, 10)
+    with pytest.raises(ValueError, match="upsample_k"):
+        RestorerConfig(upsample_search_window=3)

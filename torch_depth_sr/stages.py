@@ -46,10 +46,11 @@ def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor
     """
     trust = q.detach() if ctx.K.is_identity else None
     h, w = x.shape[-2:]
+    window, k = settings.window_and_k(upsampling=not ctx.K.is_identity)
     # k at most the candidates every pixel has (the image corner's share of the window): a small image, or a
     # small window (the "fast" preset), gets all of them instead of an error
-    k = min(settings.k, candidates_everywhere(h, w, settings.search_window, settings.include_self))
-    kw = dict(block_size=settings.block_size, search_window=settings.search_window, k=k,
+    k = min(k, candidates_everywhere(h, w, window, settings.include_self))
+    kw = dict(block_size=settings.block_size, search_window=window, k=k,
               color_weight=ctx.color_weight.detach(), temperature=ctx.temperature, include_self=settings.include_self)
     if previous is not None and settings.rematch == "refine":
         return refine_matches(x.detach(), previous, ctx.rgb, trust, **kw, reach=0, lattice=settings.rematch_lattice)
@@ -157,7 +158,8 @@ class BlockMatcher(nn.Module):
 
     def extra_repr(self) -> str:
         s = self.settings
-        return f"block_size={s.block_size}, search_window={s.search_window}, k={s.k}, rematch={s.rematch!r}"
+        return (f"block_size={s.block_size}, search_window={s.search_window}, k={s.k}, upsample_search_window="
+                f"{s.upsample_search_window}, upsample_k={s.upsample_k}, rematch={s.rematch!r}")
 
 
 class SingularDetector(nn.Module):
