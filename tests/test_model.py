@@ -247,7 +247,7 @@ def test_paper_model_runs_as_a_bench_method():
     assert float((out - s["gt"]).pow(2).mean()) < float((sample["depth"] - s["gt"]).pow(2).mean())
 
 
-@pytest.mark.parametrize("setting", [{"eta_clean": 1.0}, {"nl_value_range_clean": 0.0}])
+@pytest.mark.parametrize("setting", [{"eta_clean": 1.0}, {"nl_value_range_clean": 0.0}, {"nl_value_weight_clean": 0.0}])
 def test_clean_sample_settings_act_only_on_samples_the_singular_gate_finds_clean(setting):
     from torch_depth_sr import DepthRestorer
     from torch_depth_sr.datasets.synthetic import make_scene
@@ -262,6 +262,31 @@ def test_clean_sample_settings_act_only_on_samples_the_singular_gate_finds_clean
     rgb = s["rgb"][None].expand(2, -1, -1, -1)
     kw = dict(num_layers=3, search_window=9)
     a = DepthRestorer(**setting, **kw)(y, rgb)  # the setting off
-    b = DepthRestorer(**kw)(y, rgb)  # the defaults: eta_clean 0.25, nl_value_range_clean 1
+    b = DepthRestorer(**kw)(y, rgb)  # the defaults: eta_clean 0.25, nl_value_range_clean 1, nl_value_weight_clean 30
     assert torch.equal(a[1], b[1])  # outliers found: η and r as configured for every sample
     assert float((a[0] - b[0]).abs().max()) > 1e-3  # no outliers: the clean-sample values from the second layer on
+
+
+def test_k_is_limited_to_the_candidates_every_pixel_has():
+    """The default k (40) exceeds what a 6×6 image or the fast preset's 11×11 window offers at a corner (35):
+    the stage matches all of them instead of refusing the image."""
+    from torch_depth_sr import DepthRestorer
+    from torch_depth_sr.block_matching._common import candidates_everywhere
+
+    assert candidates_everywhere(6, 6, 15, include_self=False) == 35 < DepthRestorer().config.k
+    g = torch.Generator().manual_seed(0)
+    y = 50 + torch.randn(1, 1, 6, 6, generator=g)
+    out = DepthRestorer(num_layers=2)(y, torch.rand(1, 3, 6, 6, generator=g))
+    assert out.shape == y.shape and bool(torch.isfinite(out).all())
+    assert DepthRestorer.preset("fast", num_layers=1)(y, None).shape == y.shape
+
+
+def test_guided_upsampling_matches_with_its_own_window_and_k():
+    from torch_depth_sr import RestorerConfig
+    from torch_depth_sr.config import PRESETS
+
+    bm = RestorerConfig().block_matching
+    assert bm.window_and_k(upsampling=False) == (15, 40) and bm.window_and_k(upsampling=True) == (21, 10)
+    assert RestorerConfig(**PRESETS["fast"]).block_matching.window_and_k(upsampling=True) == (11, 10)
+    with pytest.raises(ValueError, match="upsample_k"):
+        RestorerConfig(upsample_search_window=3)

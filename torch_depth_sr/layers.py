@@ -128,6 +128,8 @@ class UnrolledLayer(nn.Module):
                     range_sigma=_range_sigma(vp, ctx.clean))
             if t.use_nonlocal:
                 alpha = new_alpha
+            if diag is not None and ctx.clean is not None and vp.weight_clean > 0 and vp.weight_clean != vp.weight:
+                diag = diag * torch.where(ctx.clean, vp.weight_clean / vp.weight, 1.0).to(diag.dtype)
         if t.use_singular and K.is_identity:
             q, conf = self.singular_detector(ctx, s.x, matches)
         beta = prior_weight(ctx, q, t) if ctx.prior is not None else None  # the guided prior's β(1−Q)

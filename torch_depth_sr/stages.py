@@ -16,6 +16,7 @@ import torch
 from torch import nn
 
 from .block_matching import BlockMatches, block_match, refine_matches
+from .block_matching._common import candidates_everywhere
 from .config import BlockMatchingConfig, SingularConfig, SolverConfig
 from .operators import laplacian
 from .singular import detect_singular, line_support, neighbour_support
@@ -45,7 +46,12 @@ def run_block_matching(x: torch.Tensor, ctx: RestorationContext, q: torch.Tensor
     ``settings.rematch == "refine"`` only their offsets and a lattice of the window are re-ranked.
     """
     trust = q.detach() if ctx.K.is_identity else None
-    kw = dict(block_size=settings.block_size, search_window=settings.search_window, k=settings.k,
+    h, w = x.shape[-2:]
+    window, k = settings.window_and_k(upsampling=not ctx.K.is_identity)
+    # k at most the candidates every pixel has (the image corner's share of the window): a small image, or a
+    # small window (the "fast" preset), gets all of them instead of an error
+    k = min(k, candidates_everywhere(h, w, window, settings.include_self))
+    kw = dict(block_size=settings.block_size, search_window=window, k=k,
               color_weight=color_weight.detach(), temperature=temperature, include_self=settings.include_self)
     if previous is not None and settings.rematch == "refine":
         return refine_matches(x.detach(), previous, ctx.rgb, trust, **kw, reach=0, lattice=settings.rematch_lattice)
@@ -168,7 +174,8 @@ class BlockMatcher(nn.Module):
 
     def extra_repr(self) -> str:
         s = self.settings
-        return (f"block_size={s.block_size}, search_window={s.search_window}, k={s.k}, rematch={s.rematch!r}, "
+        return (f"block_size={s.block_size}, search_window={s.search_window}, k={s.k}, upsample_search_window="
+                f"{s.upsample_search_window}, upsample_k={s.upsample_k}, rematch={s.rematch!r}, "
                 f"temperature={float(self.temperature):.3g}, color_weight={float(self.color_weight):.3g}")
 
 

@@ -9,7 +9,8 @@ import torch
 from .._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw
 from ..errors import DepthSRError, ShapeError
 
-__all__ = ["BlockMatches", "lattice", "prepare", "finish", "index_from_offsets", "offset_order", "symmetric_order"]
+__all__ = ["BlockMatches", "candidates_everywhere", "lattice", "prepare", "finish", "index_from_offsets", "offset_order",
+           "symmetric_order"]
 
 Scalar = Union[float, torch.Tensor]
 
@@ -85,10 +86,21 @@ def _validate(depth, rgb, trust, block_size, search_window, k, search_stride):
     check_min_size(depth, "depth", block_size, f"one {block_size}x{block_size} block; use a smaller block_size")
 
 
-def _check_k(k, h, w, search_window, search_stride, include_self):
+def candidates_everywhere(h: int, w: int, search_window: int, include_self: bool, search_stride: int = 1) -> int:
+    """The number of candidate blocks that every pixel of an ``h×w`` image has (the image corner's share of the
+    window): the largest ``k`` a search can return there.
+
+    Examples:
+        >>> candidates_everywhere(100, 100, 15, include_self=False), candidates_everywhere(6, 6, 15, False)
+        (63, 35)
+    """
     radius = search_window // 2
     n_min = _min_valid_offsets(h, radius, search_stride) * _min_valid_offsets(w, radius, search_stride)
-    n_min -= 0 if include_self else 1
+    return n_min - (0 if include_self else 1)
+
+
+def _check_k(k, h, w, search_window, search_stride, include_self):
+    n_min = candidates_everywhere(h, w, search_window, include_self, search_stride)
     if k > n_min:
         raise DepthSRError(
             f"k={k} is larger than the number of candidate blocks available at every pixel ({n_min} at the "
