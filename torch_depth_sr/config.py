@@ -597,10 +597,12 @@ ABLATIONS = {
 }
 
 # Speed presets: settings that trade a measured amount of accuracy for time (README, "Speed and memory").
-# "fast": an 11×11 search window and one re-match (layer 2) instead of 21×21 and two; on the full 2006
-# scenes RMSE +0.7 % (paper) and +0.9 % (sensor), about half the time at 640×480.
+# "fast": the defaults before issue 11's k = 40 (10 matches, the value prior's weight 10 on every sample) with an
+# 11×11 search window and one re-match (layer 2) instead of 21×21 and two; measured against those former defaults on
+# the full 2006 scenes: RMSE +0.7 % (paper) and +0.9 % (sensor), about half the time at 640×480. The defaults since
+# (k 40 in 15×15, README model choices) are about 2.6× slower than those former defaults.
 PRESETS = {
-    "fast": dict(search_window=11, upsample_search_window=11, match_layers=(2,)),
+    "fast": dict(search_window=11, k=10, nl_value_weight_clean=0.0, upsample_search_window=11, match_layers=(2,)),
 }
 
 
