@@ -14,6 +14,7 @@ from torch_depth_sr.datasets.synthetic import make_scene
 
 SETTINGS = {
     "former defaults (k 10 in 21x21)": dict(k=10, search_window=21, nl_value_weight_clean=0.0),
+    "k 20 in 21x21": dict(k=20, search_window=21),
     "k 20 in 15x15": dict(k=20, search_window=15),
     "k 30 in 15x15": dict(k=30, search_window=15),
     "k 40 in 15x15 (default)": {},
