@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # hints only: the config stays importable without torch's ope
 __all__ = [
     "ABLATIONS",
     "BlockMatchingConfig",
+    "EdgeSnapConfig",
     "InitConfig",
     "JBUConfig",
     "LayerConfig",
@@ -45,7 +46,7 @@ class RestorerConfig:
 
     The flat fields are the stored form (JSON files, ``RestorerConfig(**fields)``); each part of the model
     receives its own typed, frozen group instead of the whole config: :attr:`layer`, :attr:`block_matching`,
-    :attr:`value_prior`, :attr:`singular`, :attr:`solver`, :attr:`initial` and :attr:`upsampling` (every field
+    :attr:`value_prior`, :attr:`singular`, :attr:`solver`, :attr:`initial`, :attr:`edge_snap` and :attr:`upsampling` (every field
     but ``num_layers``, ``fidelity_band`` and ``extra`` belongs to exactly one group).
 
     Examples:
@@ -187,6 +188,15 @@ class RestorerConfig:
     # do no harm: trusted measured pixels end within c·σ_excess of their measurement, σ_excess the noise beyond
     # quantisation (0 on a clean map), c = fidelity_band (0 = off); see fidelity.py
     fidelity_band: float = 4.0
+    # edge snapping after the layers (edge_snap.py), only on samples in which the singular test's gate found outliers:
+    # snap_rounds passes of "x ← colour-weighted median of its (2 snap_radius + 1)² window where the weight on the
+    # median's side of x exceeds snap_share" (colour weights exp(−‖Δc‖₁ / snap_sigma_color), times a Gaussian of
+    # σ = snap_sigma_space pixels unless 0). 0 rounds = off. Flying pixels and edge blends go to their side.
+    snap_rounds: int = 1
+    snap_radius: int = 2
+    snap_share: float = 0.6
+    snap_sigma_color: float = 0.235
+    snap_sigma_space: float = 0.0
     # linear solves: cg_fixed_iters[i] CG iterations in layer i (the last entry repeats for later layers), with no
     # convergence test, so the host never waits for the device; a sample reaching cg_tol earlier stops changing.
     # () = iterate until every sample reaches cg_tol (at most cg_max_iter; one host synchronisation per iteration).
@@ -257,6 +267,11 @@ class RestorerConfig:
     def initial(self) -> "InitConfig":
         """The initial estimate x⁰ (``init_*`` and the sided hole fill of ``extra``)."""
         return InitConfig.from_config(self)
+
+    @property
+    def edge_snap(self) -> "EdgeSnapConfig":
+        """Edge snapping of the output on samples with outliers (``snap_*``)."""
+        return EdgeSnapConfig.from_config(self)
 
     @property
     def upsampling(self) -> "UpsamplingConfig":
@@ -386,6 +401,24 @@ class SingularConfig(_Group):
     gate: float
     _FLAT: ClassVar[dict] = _prefixed("singular_", "tau", "sigma_floor", "rounds", "support", "support_tol",
                                       "line_support", "gate")
+
+
+@dataclass(frozen=True)
+class EdgeSnapConfig(_Group):
+    """Edge snapping of the output (:func:`~torch_depth_sr.edge_snap.snap_to_sides`) on the samples in which the
+    singular test's gate found outliers; flat fields ``snap_*``."""
+
+    rounds: int
+    radius: int
+    share: float
+    sigma_color: float
+    sigma_space: float
+    _FLAT: ClassVar[dict] = _prefixed("snap_", "rounds", "radius", "share", "sigma_color", "sigma_space")
+
+    def arguments(self) -> dict:
+        """Keyword arguments of :func:`~torch_depth_sr.edge_snap.snap_to_sides` (``sigma_space`` 0 = flat window)."""
+        return dict(rounds=self.rounds, radius=self.radius, share=self.share, sigma_color=self.sigma_color,
+                    sigma_space=self.sigma_space or None)
 
 
 @dataclass(frozen=True)
@@ -745,6 +778,11 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "singular_line_support": _bool,
     "singular_gate": _real(0.0, 1.0, lo_open=False),
     "fidelity_band": _real(0.0, lo_open=False),
+    "snap_rounds": _int(0),
+    "snap_radius": _int(1),
+    "snap_share": _real(0.5, 1.0, lo_open=False, hi_open=True),
+    "snap_sigma_color": _real(0.0),
+    "snap_sigma_space": _real(0.0, lo_open=False),
     "cg_fixed_iters": _cg_fixed_iters,
     "cg_tol": _positive,
     "cg_max_iter": _int(1),

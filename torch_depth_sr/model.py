@@ -24,6 +24,7 @@ from torch import nn
 from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, RestorerConfig, load_config_file
+from .edge_snap import snap_to_sides
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .guidance import GuidanceNet
@@ -32,7 +33,7 @@ from .layers import UnrolledLayer
 from .noise import depth_scale, implausible, quantisation_step, white_noise_sigma
 from .operators import degradation_operator
 from .stages import BlockMatcher, SingularDetector
-from .state import RestorationContext, RunLog
+from .state import RestorationContext, RunLog, stage
 from .upsampling import hold_to_initial, upsample_initial
 
 __all__ = [
@@ -105,6 +106,7 @@ class DepthRestorer(nn.Module):
         # the stages the model runs itself (x⁰, Q⁰, the first matches), each owning its settings group; the layers
         # build theirs. ``terms`` says which terms the layers compute (whether x⁰ needs matches, Q⁰, a prior).
         self.terms, self.fidelity_band = config.layer, config.fidelity_band
+        self.edge_snap = config.edge_snap  # the output's last step on samples with outliers (edge_snap.py)
         self.degradation = config.upsampling.degradation  # the name of K's kind; K itself is built per forward
         self.initializer = Initializer(config.initial, config.upsampling)
         self.singular_detector = SingularDetector(config.singular)
@@ -238,11 +240,12 @@ class DepthRestorer(nn.Module):
                 ctx.guidance = self.guidance.prepare(guide, like=state.x)
             for layer in self.layers:
                 state = layer(state, ctx)
-        if timed:
-            if state.x.device.type == "cuda":
-                torch.cuda.synchronize(state.x.device)
-            ctx.log.timings["total"] = time.perf_counter() - t0
         x = state.x
+        if K.is_identity and guide is not None and self.edge_snap.rounds > 0 and ctx.clean is not None:
+            # before the band, which keeps every trusted measurement's promise (a flying pixel the singular test
+            # trusted moves at most the band's width towards its side)
+            with stage(ctx.log.timings, "snap", x.device):
+                x = snap_to_sides(x, guide, **self.edge_snap.arguments(), active=~ctx.clean)
         if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
             band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)
@@ -250,6 +253,10 @@ class DepthRestorer(nn.Module):
             white = sigma if noise_sigma is not None else white_noise_sigma(y, observed)
             x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
                                 white.to(sigma) / scale)
+        if timed:
+            if x.device.type == "cuda":
+                torch.cuda.synchronize(x.device)
+            ctx.log.timings["total"] = time.perf_counter() - t0
         x = x * s4 + o4
         if fill == "trusted":
             x = _leave_unconfident_missing(x, ctx, observed)
