@@ -22,7 +22,7 @@ from ._checks import check_4d, check_same_hw
 
 __all__ = ["sided_median", "snap_to_sides"]
 
-_ROWS_PER_CHUNK = 128  # bounds the (B, window, rows, W) stacks: 25 × 128 × 2000 × 8 bytes ≈ 50 MB at radius 2
+_ROWS_PER_CHUNK = 64  # bounds the (B, window, rows, W) stacks: 25 × 64 × 2000 × 8 bytes ≈ 26 MB at radius 2, float64
 
 
 def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_color: float = 0.235,
