@@ -5,7 +5,7 @@ import torch
 
 from torch_depth_sr import DepthRestorer, RestorerConfig
 from torch_depth_sr.datasets.synthetic import make_scene
-from torch_depth_sr.edge_snap import sided_median, snap_to_sides
+from torch_depth_sr.edge_snap import refit_to_measurements, sided_median, snap_to_sides
 from torch_depth_sr.errors import ParameterError
 from torch_depth_sr.evaluation import SensorDegradation
 from torch_depth_sr.metrics import evaluate
@@ -82,7 +82,8 @@ def test_gradient_flows_through_the_selected_values():
 
 
 @pytest.mark.parametrize("field,value", [("snap_share", 1.0), ("snap_share", 0.4), ("snap_radius", 0),
-                                         ("snap_rounds", -1), ("snap_sigma_color", 0.0)])
+                                         ("snap_rounds", -1), ("snap_sigma_color", 0.0),
+                                         ("snap_refit_radius", -1), ("snap_refit_band", 0.0)])
 def test_settings_out_of_range_are_refused(field, value):
     with pytest.raises(ParameterError, match=field):
         RestorerConfig(**{field: value})
@@ -93,7 +94,7 @@ def test_model_snaps_sensor_input():
     d = SensorDegradation(seed=0)({**s, "mask": torch.ones_like(s["gt"]), "name": "synthetic-3"})
     y, rgb = d["depth"].clamp_min(0)[None], s["rgb"][None]
     with torch.no_grad():
-        snapped, kept = DepthRestorer(num_layers=3)(y, rgb), DepthRestorer(num_layers=3, snap_rounds=0)(y, rgb)
+        snapped, kept = DepthRestorer(num_layers=3)(y, rgb), DepthRestorer(num_layers=3, snap_rounds=0, snap_refit_radius=0)(y, rgb)
     sample = {**d, "depth": y[0]}
     assert evaluate(snapped, sample)["flying_left"] < evaluate(kept, sample)["flying_left"]
 
@@ -106,10 +107,34 @@ def test_on_clean_maps_trusted_pixels_stay_and_the_rest_is_not_worse():
     for seed in range(6):
         s = make_scene(64, 64, seed=seed)
         clean, rgb = s["gt"][None], s["rgb"][None]
-        for rounds in (0, 1):
+        for rounds in (0, 1):  # 0: neither snapping nor the refit; 1: the defaults
+            off = {} if rounds else {"snap_rounds": 0, "snap_refit_radius": 0}
             with torch.no_grad():
-                r = DepthRestorer(num_layers=3, snap_rounds=rounds).restore_with_details(clean, rgb)
+                r = DepthRestorer(num_layers=3, **off).restore_with_details(clean, rgb)
             trusted = r.trusted > 0
             assert (r.depth - clean)[trusted].abs().max() < 1e-3
             errors[rounds].append(float((r.depth - clean).pow(2).mean().sqrt()))
     assert sum(errors[1]) < sum(errors[0])
+
+
+def test_refit_takes_the_side_measurements_near_edges_and_nothing_elsewhere():
+    depth, rgb = _step_edge(16, 16)
+    g = torch.Generator().manual_seed(2)
+    y = depth + 0.5 * torch.randn(depth.shape, generator=g)
+    pulled = depth.clone()
+    pulled[..., 7] = 14.0   # the near side's last column, pulled towards the far side
+    pulled[..., 8] = 46.0   # and the far side's first column
+    pulled[..., 1:3] = 10.3  # a flat region far from the edge: left alone whatever its value
+    before = pulled.clone()
+    out = refit_to_measurements(pulled, y, torch.ones_like(y), rgb, radius=3, band=5.0, edge=20.0)
+    assert torch.equal(pulled, before)
+    assert (out[..., 7] - 10.0).abs().max() < 1.0 and (out[..., 8] - 50.0).abs().max() < 1.0
+    assert torch.equal(out[..., :3], pulled[..., :3])
+    # each new value is one of the measurements
+    assert all(bool((y == v).any()) for v in out[..., 7:9].flatten())
+    # no measurement within the band, or the sample switched off: nothing moves
+    assert torch.equal(refit_to_measurements(pulled, y, torch.zeros_like(y), rgb, radius=3, band=5.0, edge=20.0),
+                       pulled)
+    off = torch.zeros(1, 1, 1, 1, dtype=torch.bool)
+    assert torch.equal(refit_to_measurements(pulled, y, torch.ones_like(y), rgb, radius=3, band=5.0, edge=20.0,
+                                             active=off), pulled)

@@ -197,6 +197,12 @@ class RestorerConfig:
     snap_share: float = 0.6
     snap_sigma_color: float = 0.235
     snap_sigma_space: float = 0.0
+    # then, where the 5×5 range of x exceeds snap_refit_edge noise σ (a depth edge is near): x ← the colour-weighted
+    # median of the measurements within snap_refit_band noise σ of x in a (2 snap_refit_radius + 1)² window (the
+    # layers pull edge values towards the other surface; the side's own measurements are not pulled). 0 = off.
+    snap_refit_radius: int = 5
+    snap_refit_band: float = 1.5
+    snap_refit_edge: float = 2.0
     # linear solves: cg_fixed_iters[i] CG iterations in layer i (the last entry repeats for later layers), with no
     # convergence test, so the host never waits for the device; a sample reaching cg_tol earlier stops changing.
     # () = iterate until every sample reaches cg_tol (at most cg_max_iter; one host synchronisation per iteration).
@@ -405,20 +411,30 @@ class SingularConfig(_Group):
 
 @dataclass(frozen=True)
 class EdgeSnapConfig(_Group):
-    """Edge snapping of the output (:func:`~torch_depth_sr.edge_snap.snap_to_sides`) on the samples in which the
-    singular test's gate found outliers; flat fields ``snap_*``."""
+    """Edge snapping of the output (:func:`~torch_depth_sr.edge_snap.snap_to_sides`, ``rounds`` passes) and the refit
+    of values near depth edges to the measurements (:func:`~torch_depth_sr.edge_snap.refit_to_measurements`,
+    ``refit_radius`` 0 = off), on the samples in which the singular test's gate found outliers; flat fields
+    ``snap_*``."""
 
     rounds: int
     radius: int
     share: float
     sigma_color: float
     sigma_space: float
-    _FLAT: ClassVar[dict] = _prefixed("snap_", "rounds", "radius", "share", "sigma_color", "sigma_space")
+    refit_radius: int
+    refit_band: float
+    refit_edge: float
+    _FLAT: ClassVar[dict] = _prefixed("snap_", "rounds", "radius", "share", "sigma_color", "sigma_space",
+                                      "refit_radius", "refit_band", "refit_edge")
 
     def arguments(self) -> dict:
         """Keyword arguments of :func:`~torch_depth_sr.edge_snap.snap_to_sides` (``sigma_space`` 0 = flat window)."""
         return dict(rounds=self.rounds, radius=self.radius, share=self.share, sigma_color=self.sigma_color,
                     sigma_space=self.sigma_space or None)
+
+    def refit_arguments(self) -> dict:
+        """Keyword arguments of :func:`~torch_depth_sr.edge_snap.refit_to_measurements`."""
+        return dict(radius=self.refit_radius, band=self.refit_band, edge=self.refit_edge, sigma_color=self.sigma_color)
 
 
 @dataclass(frozen=True)
@@ -783,6 +799,9 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "snap_share": _real(0.5, 1.0, lo_open=False, hi_open=True),
     "snap_sigma_color": _real(0.0),
     "snap_sigma_space": _real(0.0, lo_open=False),
+    "snap_refit_radius": _int(0),
+    "snap_refit_band": _real(0.0),
+    "snap_refit_edge": _real(0.0, lo_open=False),
     "cg_fixed_iters": _cg_fixed_iters,
     "cg_tol": _positive,
     "cg_max_iter": _int(1),

@@ -20,8 +20,9 @@ import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
 
-__all__ = ["sided_median", "snap_to_sides"]
+__all__ = ["refit_to_measurements", "sided_median", "snap_to_sides"]
 
+_PIXELS_PER_CHUNK = 16384  # edge pixels per gather in refit_to_measurements: 16384 × 121 × (8 + 3·8) bytes ≈ 63 MB
 _ROWS_PER_CHUNK = 64  # bounds the (B, window, rows, W) stacks: 25 × 64 × 2000 × 8 bytes ≈ 26 MB at radius 2, float64
 
 
@@ -82,19 +83,20 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
             mirror_rows, mirror_cols = slice(r0 + r - dy, r1 + r - dy), slice(r - dx, r - dx + w)
             votes = vp[:, 0, window_rows, cols] * inside[:, 0, mirror_rows, mirror_cols]
             weights.append(torch.exp(-distance / sigma_color) * votes)
-        v, wt = torch.stack(values, 1), torch.stack(weights, 1)  # (B, n, rows, W)
+        # window last: the sort runs over contiguous memory (along a middle dimension it was ~3× slower)
+        v, wt = torch.stack(values, -1), torch.stack(weights, -1)  # (B, rows, W, n)
         if spatial is not None:
-            wt = wt * spatial
-        sorted_v, order = v.sort(1)
-        cumulative = wt.gather(1, order).cumsum(1)
-        total = cumulative[:, -1:]
-        position = (cumulative < 0.5 * total).sum(1, keepdim=True).clamp_max(len(offsets) - 1)
-        m = sorted_v.gather(1, position)
-        xi = x[:, :, r0:r1]
-        below = (wt * (v < xi)).sum(1, keepdim=True)
-        above = (wt * (v > xi)).sum(1, keepdim=True)
-        median[:, :, r0:r1] = m
-        share[:, :, r0:r1] = torch.where(m < xi, below, above) / total.clamp_min(torch.finfo(x.dtype).tiny)
+            wt = wt * spatial.view(1, 1, 1, -1)
+        sorted_v, order = v.sort(-1)
+        cumulative = wt.gather(-1, order).cumsum(-1)
+        total = cumulative[..., -1:]
+        position = (cumulative < 0.5 * total).sum(-1, keepdim=True).clamp_max(len(offsets) - 1)
+        m = sorted_v.gather(-1, position)[..., 0]
+        xi = x[:, 0, r0:r1]
+        below = (wt * (v < xi[..., None])).sum(-1)
+        above = (wt * (v > xi[..., None])).sum(-1)
+        median[:, 0, r0:r1] = m
+        share[:, 0, r0:r1] = torch.where(m < xi, below, above) / total[..., 0].clamp_min(torch.finfo(x.dtype).tiny)
     return median, share
 
 
@@ -119,3 +121,57 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
             move = move & active
         x = torch.where(move, median, x)
     return x
+
+
+def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor,
+                          radius: int = 5, band: float = 1.5, edge: float = 2.0, sigma_color: float = 0.235,
+                          active: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """Near depth edges, ``x_i ←`` the colour-weighted median of the *measurements* ``y_j`` within ``band`` of ``x_i``.
+
+    A restorer's values next to a depth edge are pulled towards the other surface (its smoothing reaches across);
+    the measurements of the pixel's own side are not, and the median of those within ``band`` of ``x_i`` (which
+    excludes the other surface, flying pixels and impulses) is an estimate of the side's value free of that pull.
+    It acts where the ``5×5`` range of ``x`` exceeds ``edge`` (a depth edge is near) and at least one full colour
+    weight votes; elsewhere ``x`` is kept. ``band`` and ``edge`` are in the units of ``x`` (the model passes noise-σ
+    units). Weights as :func:`sided_median`, over a ``(2 radius + 1)²`` window of measured pixels.
+
+    Examples:
+        >>> y = torch.tensor([[[[10., 11., 9., 10., 50., 51., 49.]]]]).expand(1, 1, 3, 7).contiguous()
+        >>> x = y.clone(); x[..., 3] = 14.0  # a value next to the edge, pulled towards the far side
+        >>> rgb = torch.zeros(1, 3, 3, 7); rgb[:, :, :, 4:] = 1.0
+        >>> refit_to_measurements(x, y, torch.ones_like(y), rgb, radius=3, band=5.0, edge=20.0)[0, 0, 1, 3].item()
+        10.0
+    """
+    check_4d(x, "x", channels=1)
+    check_same_hw(x, y, "x", "y")
+    check_same_hw(x, guide, "x", "guide")
+    b, _, h, w = x.shape
+    r = int(radius)
+    near_edge = (F.max_pool2d(x, 5, 1, 2) + F.max_pool2d(-x, 5, 1, 2)) > edge
+    if active is not None:
+        near_edge = near_edge & active
+    where = near_edge.nonzero()  # (N, 4): sample, channel, row, column
+    if where.shape[0] == 0:
+        return x
+    yp = F.pad(torch.where(observed > 0, y, torch.zeros_like(y)), (r, r, r, r))
+    op = F.pad((observed > 0).to(x.dtype), (r, r, r, r))
+    gp = F.pad(guide.to(x), (r, r, r, r), mode="replicate")
+    offsets = torch.tensor([(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)], device=x.device)
+    out = x.clone()
+    for start in range(0, where.shape[0], _PIXELS_PER_CHUNK):
+        bi, _, ri, ci = where[start:start + _PIXELS_PER_CHUNK].unbind(1)
+        rows = ri[:, None] + r + offsets[None, :, 0]  # (n, window) in the padded frame
+        cols = ci[:, None] + r + offsets[None, :, 1]
+        bb = bi[:, None].expand_as(rows)
+        values, votes = yp[bb, 0, rows, cols], op[bb, 0, rows, cols]
+        centre = x[bi, 0, ri, ci][:, None]
+        colour = gp[bb, :, rows, cols]  # (n, window, C)
+        distance = (colour - gp[bi, :, ri + r, ci + r][:, None, :]).abs().sum(-1)
+        weight = torch.exp(-distance / sigma_color) * votes * ((values - centre).abs() <= band)
+        sorted_v, order = values.sort(1)
+        cumulative = weight.gather(1, order).cumsum(1)
+        total = cumulative[:, -1:]
+        position = (cumulative < 0.5 * total).sum(1, keepdim=True).clamp_max(values.shape[1] - 1)
+        median = sorted_v.gather(1, position)[:, 0]
+        out[bi, 0, ri, ci] = torch.where(total[:, 0] > 1.0, median, centre[:, 0])
+    return out

@@ -24,7 +24,7 @@ from torch import nn
 from ._checks import check_noise_sigma, check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, RestorerConfig, load_config_file
-from .edge_snap import snap_to_sides
+from .edge_snap import refit_to_measurements, snap_to_sides
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .fidelity import clamp_to_measurements, noise_band
 from .guidance import GuidanceNet
@@ -241,11 +241,15 @@ class DepthRestorer(nn.Module):
             for layer in self.layers:
                 state = layer(state, ctx)
         x = state.x
-        if K.is_identity and guide is not None and self.edge_snap.rounds > 0 and ctx.clean is not None:
+        snap = self.edge_snap
+        snapping = snap.rounds > 0 or snap.refit_radius > 0
+        if K.is_identity and guide is not None and ctx.clean is not None and snapping:
             # before the band, which keeps every trusted measurement's promise (a flying pixel the singular test
             # trusted moves at most the band's width towards its side)
             with stage(ctx.log.timings, "snap", x.device):
-                x = snap_to_sides(x, guide, **self.edge_snap.arguments(), active=~ctx.clean)
+                x = snap_to_sides(x, guide, **snap.arguments(), active=~ctx.clean)
+                if snap.refit_radius > 0:
+                    x = refit_to_measurements(x, yn, observed, guide, **snap.refit_arguments(), active=~ctx.clean)
         if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
             band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)
