@@ -17,7 +17,7 @@ import torch.nn.functional as F
 from torch_depth_sr.edge_snap import refit_to_measurements, sided_median, snap_to_sides
 
 OUT = os.environ.get("OUT", "/tmp/edge-snap")
-SCENES = "Baby1 Baby2 Baby3 Cloth1 Cloth2 Cloth3 Cloth4 Midd1 Midd2 Wood1 Wood2".split()
+SCENES = sorted(f[:-4] for f in os.listdir(OUT) if f.endswith(".npz"))  # what save_outputs.py wrote: 2006 scenes only
 
 
 def stats(p, z):
