@@ -138,3 +138,15 @@ def test_refit_takes_the_side_measurements_near_edges_and_nothing_elsewhere():
     off = torch.zeros(1, 1, 1, 1, dtype=torch.bool)
     assert torch.equal(refit_to_measurements(pulled, y, torch.ones_like(y), rgb, radius=3, band=5.0, edge=20.0,
                                              active=off), pulled)
+
+
+def test_shipped_models_can_be_loaded_without_the_edge_steps():
+    from torch_depth_sr.errors import ParameterError as PE
+
+    model = DepthRestorer.from_pretrained("denoise", snap_rounds=0, snap_refit_radius=0)
+    assert model.edge_snap.rounds == 0 and model.edge_snap.refit_radius == 0
+    assert DepthRestorer.from_pretrained("denoise").edge_snap.rounds == 1  # the defaults otherwise
+    with pytest.raises(PE, match="snap_rounds"):
+        DepthRestorer.from_pretrained("denoise", snap_rounds=-1)
+    with pytest.raises(PE, match="no_such_field"):
+        DepthRestorer.from_pretrained("denoise", no_such_field=1)

@@ -12,6 +12,7 @@ config's ``degradation`` and the sizes of the inputs and handed to the initial e
 """
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import time
 from pathlib import Path
@@ -284,8 +285,11 @@ class DepthRestorer(nn.Module):
 
     @classmethod
     def load(cls, directory: Union[str, Path], trainable: bool = False,
-             map_location: Union[str, torch.device] = "cpu") -> "DepthRestorer":
+             map_location: Union[str, torch.device] = "cpu", **overrides) -> "DepthRestorer":
         """Load what :meth:`save` wrote (never unpickles arbitrary objects).
+
+        ``overrides``: :class:`RestorerConfig` fields that replace the stored ones, e.g. ``snap_rounds=0``; fields that
+        change the parameters' shapes (``num_layers``, ``guidance_net``) make the state dict fail to load.
 
         Raises:
             ModelFileError: the folder or a file is missing, ``config.json`` is not valid JSON or has a field
@@ -296,14 +300,18 @@ class DepthRestorer(nn.Module):
         if not d.is_dir():
             raise ModelFileError(d, "no such folder; DepthRestorer.load needs the folder DepthRestorer.save wrote "
                                     "(config.json and state_dict.pt).")
-        model = cls(load_config_file(d / "config.json"), trainable=trainable)
+        config = load_config_file(d / "config.json")
+        if overrides:
+            config = RestorerConfig.from_dict({**dataclasses.asdict(config), **overrides})
+        model = cls(config, trainable=trainable)
         _load_state_file(model, d / "state_dict.pt", map_location)
         return model
 
     @classmethod
     def from_pretrained(cls, name: str, trainable: bool = False,
-                        map_location: Union[str, torch.device] = "cpu") -> "DepthRestorer":
-        """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README).
+                        map_location: Union[str, torch.device] = "cpu", **overrides) -> "DepthRestorer":
+        """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README); ``overrides`` as
+        :meth:`load` (e.g. ``snap_rounds=0, snap_refit_radius=0``: without the edge steps).
 
         Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same
         with the guidance network's per-pixel thresholds), ``'upsample-x4'`` where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
@@ -317,7 +325,7 @@ class DepthRestorer(nn.Module):
         if name not in available:
             raise DepthSRError(f"no pretrained parameters named {name!r}; available are {available} "
                              f"(folders of {root} holding config.json and state_dict.pt).")
-        return cls.load(root / name, trainable=trainable, map_location=map_location)
+        return cls.load(root / name, trainable=trainable, map_location=map_location, **overrides)
 
 
 FILL_MODES = ("all", "trusted")
