@@ -195,8 +195,9 @@ def test_models_run_on_the_protocols_input():
     assert full.config.degradation == "bicubic" and full.config.num_layers == 2
     out = _run_model(full, s, "cpu")
     assert out.shape == s["gt"].shape and torch.isfinite(out).all()
-    assert make_model("trained", 4) is not None  # upsample-x4 ships
-    assert make_model("trained", 16) is None  # nothing ships for x16
+    assert make_model("trained-x4", 4) is not None  # upsample-x4 ships
+    assert make_model("trained-x4", 16) is None  # nothing ships for x16
+    assert all(make_model("trained", s).refiner is not None for s in (4, 16))  # "upsample": one for every factor
 
 
 def test_cli_rows(tmp_path, capsys, monkeypatch):
@@ -208,7 +209,7 @@ def test_cli_rows(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(track, "_run_model", lambda model, s, device: bicubic(s["model_lr"], s["gt"].shape[-2:]) + 0.5)
     out = tmp_path / "g.json"
     assert main(["bench", "--track", "gdsr", "--sets", "Middlebury", "--scenes", "30", "--scales", "16",
-                 "--noise", "0", "5", "--methods", "bicubic", "full", "trained", "--json", str(out),
+                 "--noise", "0", "5", "--methods", "bicubic", "full", "trained-x4", "--json", str(out),
                  "--config", '{"num_layers": 2, "match_layers": [1]}']) == 0
     data = json.loads(out.read_text())
     rows = data["results"]
@@ -216,8 +217,8 @@ def test_cli_rows(tmp_path, capsys, monkeypatch):
     for r in rows:
         assert {"dataset", "scale", "noise", "method", "rmse", "image", "heldout"} <= set(r)
         assert r["dataset"] == "Middlebury" and r["scale"] == 16 and r["image"] == "Middlebury_30" and r["heldout"]
-    trained = [r for r in rows if r["method"] == "trained"]
-    assert all(r["rmse"] is None and r["available"] is False for r in trained)  # no shipped x16 model
+    trained = [r for r in rows if r["method"] == "trained-x4"]
+    assert all(r["rmse"] is None and r["available"] is False for r in trained)  # no shipped upsample-x16 model
     ok = {(r["method"], r["noise"]): r["rmse"] for r in rows if r["rmse"] is not None}
     assert set(ok) == {("bicubic", 0.0), ("bicubic", 5.0), ("full", 0.0), ("full", 5.0)}
     assert all(0 < v < 20 for v in ok.values())

@@ -1,4 +1,4 @@
-"""Command line: ``torch-depth-sr {demo,restore,bench,train}``."""
+"""Command line: ``torch-depth-sr {demo,restore,bench,train,train-refiner}``."""
 from __future__ import annotations
 
 import argparse
@@ -175,13 +175,14 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--config", default=None,
                    help='JSON of RestorerConfig overrides for tv, tv+nl, full (e.g. \'{"block_size": 5}\')')
     b.add_argument("--pretrained", default=None, metavar="FOLDER",
-                   help="methods trained/trained-x4 load this saved model folder (e.g. runs/x/best) instead of the "
+                   help="methods trained/trained-x4/trained-upsample load this saved model folder (e.g. runs/x/best) instead of the "
                         "shipped parameters")
     b.set_defaults(func=cmd_bench)
 
-    from .training.cli import add_train_parser
+    from .training.cli import add_train_parser, add_train_refiner_parser
 
     add_train_parser(sub)
+    add_train_refiner_parser(sub)
     for name, sp in sub.choices.items():
         _add_debug(sp, default=argparse.SUPPRESS)  # also after the command; SUPPRESS keeps the top-level value
     return p

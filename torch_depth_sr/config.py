@@ -80,6 +80,12 @@ class RestorerConfig:
     guidance_net: bool = False
     guidance_channels: int = 16  # feature channels of the guidance network
     guidance_range: float = 4.0  # R: every multiplier of the guidance network lies in [1/R, R] (R = 1: all 1)
+    # upsampling only: a learned residual CNN corrects the output at depth edges, clamped to the range of the
+    # low-resolution values around each pixel (torch_depth_sr.refiner; issue 14); zero-initialised, trained on the
+    # frozen model's outputs (torch_depth_sr.training.refiner); off = the model alone
+    refine_net: bool = False
+    refine_channels: int = 32
+    refine_layers: int = 6
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 11
@@ -753,6 +759,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "guided_prior": _real(0.0, lo_open=False),
     "prior_on_singular": _bool, "init_singular": _bool, "guidance_net": _bool, "guidance_channels": _int(1), "init_keep_observed": _bool,
     "guidance_range": _real(1.0, lo_open=False),
+    "refine_net": _bool, "refine_channels": _int(1), "refine_layers": _int(0),
     "init_kernel_size": _int(1),
     "init_sigma_space": _positive, "init_sigma_color": _positive,
     "init_dt_sigma_space": _positive, "init_dt_sigma_color": _positive, "init_dt_iterations": _int(1),

@@ -33,6 +33,7 @@ from .initial import Initializer, initial_estimate
 from .layers import UnrolledLayer
 from .noise import depth_scale, implausible, quantisation_step, white_noise_sigma
 from .operators import degradation_operator
+from .refiner import EdgeRefiner
 from .stages import BlockMatcher, SingularDetector
 from .state import RestorationContext, RunLog, stage
 from .upsampling import hold_to_initial, upsample_initial
@@ -121,6 +122,10 @@ class DepthRestorer(nn.Module):
         if config.guidance_net:
             self.guidance = GuidanceNet(config.num_layers, config.guidance_channels,
                                         config.guidance_range).requires_grad_(trainable)
+        # upsampling only: the learned, clamped correction at depth edges (issue 14); None = no state-dict keys
+        self.refiner: Optional[EdgeRefiner] = None
+        if config.refine_net:
+            self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers).requires_grad_(trainable)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod
@@ -258,6 +263,9 @@ class DepthRestorer(nn.Module):
             white = sigma if noise_sigma is not None else white_noise_sigma(y, observed)
             x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
                                 white.to(sigma) / scale)
+            if self.refiner is not None and guide is not None:
+                with stage(ctx.log.timings, "refine", x.device):  # holes of the input: what the model made of them
+                    x = self.refiner(x, torch.where(observed > 0, yn, K(x)), guide)
         if timed:
             if x.device.type == "cuda":
                 torch.cuda.synchronize(x.device)

@@ -400,28 +400,42 @@ class AddImpulses(_DepthTransform):
 
 
 class Downsample(_DepthTransform):
-    """Area-downsample the depth by an integer ``factor`` (guided upsampling inputs).
+    """Downsample the depth by an integer ``factor`` (guided upsampling inputs).
 
-    Averages the measured pixels of each ``factor×factor`` cell (a cell with none stays missing);
-    ``rgb``, ``gt`` and ``mask`` keep their resolution, so the restorer infers the factor. With
-    ``noise_after`` the measured low-resolution values get Gaussian noise of that std.
+    ``kernel="area"`` averages the measured pixels of each ``factor×factor`` cell (a cell with none stays
+    missing); ``kernel="bicubic"`` is the antialiased bicubic resize of the guided super-resolution protocol
+    (Pillow's, as DKN/FDSR/DCTNet degrade their inputs), normalised by the resized measurement mask so that holes
+    do not pull values towards 0; a low-resolution pixel whose kernel mass lies mostly (≥ half) on missing pixels
+    stays missing. ``rgb``, ``gt`` and ``mask`` keep their resolution, so the restorer infers the factor.
 
     Args:
         factor: integer >= 1; H and W must be multiples of it (crop first).
+        kernel: ``"area"`` or ``"bicubic"``.
     """
 
-    def __init__(self, factor: int = 4) -> None:
+    KERNELS = ("area", "bicubic")
+
+    def __init__(self, factor: int = 4, kernel: str = "area") -> None:
         if int(factor) != factor or factor < 1:
             raise DepthSRError(f"factor must be an integer >= 1; got {factor}.")
-        self.factor = int(factor)
+        if kernel not in self.KERNELS:
+            raise DepthSRError(f"kernel={kernel!r}; allowed are {self.KERNELS}.")
+        self.factor, self.kernel = int(factor), kernel
 
     def _degrade(self, f, measured, p):
         s = self.factor
         check_divisible(f, "depth", s, f"Downsample(factor={s}) (crop first: RandomCrop)")
         x, shape = _as4d(f)
         m, _ = _as4d(measured.to(f.dtype))
-        num, den = F.avg_pool2d(x * m, s), F.avg_pool2d(m, s)
-        out = torch.where(den > 0, num / den.clamp_min(1e-12), torch.zeros_like(num))
+        if self.kernel == "area":
+            num, den = F.avg_pool2d(x * m, s), F.avg_pool2d(m, s)
+            keep = den > 0
+        else:
+            size = (x.shape[-2] // s, x.shape[-1] // s)
+            num, den = (F.interpolate(v, size=size, mode="bicubic", antialias=True, align_corners=False)
+                        for v in (x * m, m))
+            keep = den >= 0.5
+        out = torch.where(keep, num / den.clamp_min(1e-12), torch.zeros_like(num))
         return out.reshape(*shape[:-2], *out.shape[-2:])
 
 

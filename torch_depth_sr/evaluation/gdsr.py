@@ -14,8 +14,9 @@ trained --json F`` runs, per image of each set (:mod:`torch_depth_sr.datasets.gd
 3. methods: ``bicubic`` = Pillow's bicubic upsampling of the input to the ground truth's size (the networks'
    input, DCTNet's ``DepthLrUp``); ``full`` = the frozen :class:`~torch_depth_sr.DepthRestorer` (defaults of
    ``ablation("full")``) with ``degradation="bicubic"`` (the K of this protocol) plus any ``--config``
-   overrides; ``trained`` = the shipped ``from_pretrained("upsample-x{s}")`` as shipped, and a row marked not
-   available where no such model ships. The models get the low-resolution depth in the protocol's units and
+   overrides; ``trained`` = the shipped ``from_pretrained("upsample")`` (the frozen model plus the edge refiner,
+   one model for every factor; ``--pretrained FOLDER`` evaluates a saved candidate instead); ``trained-x4`` =
+   the older ``from_pretrained("upsample-x{s}")``, a row marked not available where no such model ships. The models get the low-resolution depth in the protocol's units and
    the full-resolution colour; input values <= 0 are missing. For the real scene, whose input is 192x144 for a
    512x384 grid (factor 8/3, not an integer), the models get the input resized to 128x96 (Pillow bicubic) and
    upsample it x4; bicubic resizes 192x144 straight to 512x384, as DCTNet does;
@@ -51,7 +52,7 @@ if TYPE_CHECKING:
 __all__ = ["METHODS", "REAL_SCALE", "crop_to_multiple", "resize_pillow", "add_noise", "degrade", "bicubic",
            "rmse", "make_model", "run_gdsr", "summarise_gdsr"]
 
-METHODS = ("bicubic", "full", "trained")
+METHODS = ("bicubic", "full", "trained", "trained-x4")
 REAL_SCALE = 4  # RGBDD_Test_Realscene: the models upsample x4 (input resized to a quarter of the HR grid)
 NOISE_SEED = 0
 GREY_SETS = ("Middlebury", "Lu")
@@ -128,15 +129,19 @@ def rmse(pred: torch.Tensor, gt: torch.Tensor, dataset: str) -> float:
     return float((p - g).square().mean().sqrt())
 
 
-def make_model(method: str, scale: int, config: Optional[dict] = None, device: str = "cpu") -> Optional[DepthRestorer]:
-    """The model behind a method name, or None where no such model exists (``trained`` for a scale without a
-    shipped ``upsample-x{scale}``)."""
+def make_model(method: str, scale: int, config: Optional[dict] = None, device: str = "cpu",
+               pretrained: Optional[str] = None) -> Optional[DepthRestorer]:
+    """The model behind a method name, or None where no such model exists (``trained-x4`` for a scale without a
+    shipped ``upsample-x{scale}``). ``pretrained``: a saved model folder that ``trained`` loads instead."""
     from ..errors import DepthSRError
     from ..model import DepthRestorer
 
     if method == "full":
         return DepthRestorer.ablation("full", **{"degradation": "bicubic", **(config or {})}).to(device).eval()
     if method == "trained":
+        model = DepthRestorer.load(pretrained) if pretrained else DepthRestorer.from_pretrained("upsample")
+        return model.to(device).eval()
+    if method == "trained-x4":
         try:
             return DepthRestorer.from_pretrained(f"upsample-x{scale}").to(device).eval()
         except DepthSRError:
@@ -217,7 +222,8 @@ def run_gdsr(args: argparse.Namespace, config: Optional[dict] = None) -> int:
                 else:
                     key = (m, sample["factor"])
                     if key not in models:
-                        models[key] = make_model(m, sample["factor"], config, device)
+                        models[key] = make_model(m, sample["factor"], config, device,
+                                                 getattr(args, "pretrained", None))
                     pred = None if models[key] is None else _run_model(models[key], sample, device)
                 if pred is None:
                     row.update(rmse=None, available=False, seconds=None,

@@ -53,7 +53,7 @@ RGF_PARAMS = {"paper": dict(sigma_space=3.0, sigma_color=7.0, iterations=3),
 def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[str] = None):
     from ..model import DepthRestorer
 
-    if name in ("trained", "trained-x4") and pretrained is not None:  # a candidate before it ships
+    if name in ("trained", "trained-x4", "trained-upsample") and pretrained is not None:  # a candidate before it ships
         return DepthRestorer.load(pretrained).to(device)
     if name == "trained":
         return DepthRestorer.from_pretrained("denoise").to(device)
@@ -61,6 +61,8 @@ def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[s
         return DepthRestorer.from_pretrained("denoise-guided").to(device)
     if name == "trained-x4":
         return DepthRestorer.from_pretrained("upsample-x4").to(device)
+    if name == "trained-upsample":  # the frozen model plus the edge refiner, every factor (issue 14)
+        return DepthRestorer.from_pretrained("upsample").to(device)
     if name == "full-fast":
         return DepthRestorer.preset("fast", **json.loads(overrides)).to(device)
     if name == "paper-model":  # the paper's model without the library's extensions (ablation "paper")
@@ -76,7 +78,7 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
     ``full``), e.g. ``{"block_size": 5}``; the shipped ``trained`` parameters and the baselines ignore it.
     ``track``: the benchmark track; ``jbf`` and ``rgf`` have settings fitted per track (``paper`` when not given).
     ``pretrained``: a folder written by :meth:`~torch_depth_sr.DepthRestorer.save` (a training run's ``best``) that
-    ``trained`` and ``trained-x4`` load instead of the shipped parameters.
+    ``trained``, ``trained-x4`` and ``trained-upsample`` load instead of the shipped parameters.
     """
     y = sample["depth"][None].to(device)
     rgb = sample["rgb"][None].to(device)
@@ -105,8 +107,9 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             from ..baselines import dictionary_denoise
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
-        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-guided", "trained-x4"):
+        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-guided", "trained-x4",
+                    "trained-upsample"):
             return _model(name, device, json.dumps(config or {}, sort_keys=True),
-                          pretrained if name in ("trained", "trained-x4") else None)(y, rgb)
+                          pretrained if name in ("trained", "trained-x4", "trained-upsample") else None)(y, rgb)
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
-                     "and 'full-fast', 'paper-model', 'trained', 'trained-guided', 'trained-x4'.")
+                     "and 'full-fast', 'paper-model', 'trained', 'trained-guided', 'trained-x4', 'trained-upsample'.")

@@ -17,7 +17,7 @@ from typing import Optional, Sequence
 
 from .train import TrainConfig
 
-__all__ = ["config_from_args", "cmd_train", "add_train_parser", "main"]
+__all__ = ["config_from_args", "cmd_train", "cmd_train_refiner", "add_train_parser", "add_train_refiner_parser", "main"]
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
@@ -37,6 +37,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="training noise std range (grey levels)")
     p.add_argument("--val-sigma", type=float, default=d.val_sigma)
     p.add_argument("--scale-factor", type=int, default=d.scale_factor, help=">1: train guided upsampling")
+    p.add_argument("--downsample", choices=["area", "bicubic"], default=d.downsample,
+                   help="kernel that makes the low-resolution inputs (bicubic: the gdsr protocol's)")
+    p.add_argument("--clean-share", type=float, default=d.clean_share,
+                   help="probability of a noise-free training item (σ = 0)")
     p.add_argument("--synthetic", type=int, default=d.synthetic, help="number of synthetic training scenes")
     p.add_argument("--synthetic-only", action="store_true", help="no Middlebury data (e.g. CI)")
     p.add_argument("--val-scenes", nargs="*", default=list(d.val_scenes), help="2006 scenes held out for validation")
@@ -59,6 +63,7 @@ def config_from_args(args: argparse.Namespace) -> TrainConfig:
                        lr=args.lr, guidance_lr=args.guidance_lr, weight_decay=args.weight_decay, loss=args.loss,
                        degradation=args.degradation,
                        sigma=tuple(args.sigma), val_sigma=args.val_sigma, scale_factor=args.scale_factor,
+                       downsample=args.downsample, clean_share=args.clean_share,
                        synthetic=args.synthetic, use_middlebury=not args.synthetic_only,
                        val_scenes=tuple(args.val_scenes), val_size=args.val_size, val_every=args.val_every,
                        save_every=args.save_every, num_workers=args.workers, threads=args.threads, seed=args.seed,
@@ -86,6 +91,59 @@ def add_train_parser(subparsers: argparse._SubParsersAction) -> argparse.Argumen
     p = subparsers.add_parser("train", help="learn the per-layer parameters end to end (torchrun for DDP)")
     _add_arguments(p)
     p.set_defaults(func=cmd_train)
+    return p
+
+
+def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
+    from .refiner import RefinerConfig
+
+    d = RefinerConfig()
+    p.add_argument("--out", default=d.out, help="run folder (best/, last/, history.json)")
+    p.add_argument("--data", default=None, help="data root holding middlebury2006 (default: $TORCH_DEPTH_SR_DATA)")
+    p.add_argument("--source", choices=["middlebury2006", "gdsr"], default=d.source,
+                   help="the 2006 scenes' files: the project's copy, or the guided-SR test set's versions of them")
+    p.add_argument("--base", default=json.dumps(d.base),
+                   help="RestorerConfig overrides of the frozen model, as JSON (default: %(default)s)")
+    p.add_argument("--factors", type=int, nargs="+", default=list(d.factors))
+    p.add_argument("--noises", type=float, nargs="+", default=list(d.noises),
+                   help="noise σ on a 0-255 scale of each image's range (the gdsr protocol's)")
+    p.add_argument("--synthetic", type=int, default=d.synthetic, help="number of synthetic training scenes")
+    p.add_argument("--val-scenes", nargs="*", default=list(d.val_scenes), help="2006 scenes held out for validation")
+    p.add_argument("--channels", type=int, default=d.channels)
+    p.add_argument("--layers", type=int, default=d.layers)
+    p.add_argument("--steps", type=int, default=d.steps)
+    p.add_argument("--batch-size", type=int, default=d.batch_size)
+    p.add_argument("--crop", type=int, default=d.crop)
+    p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--val-every", type=int, default=d.val_every)
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--threads", type=int, default=d.threads)
+    p.add_argument("--no-progress", action="store_true")
+
+
+def cmd_train_refiner(args: argparse.Namespace) -> int:
+    """``train-refiner``: the edge refiner on the frozen model's outputs (torch_depth_sr.training.refiner)."""
+    from ..errors import UsageError
+    from .refiner import RefinerConfig, train_refiner
+
+    if args.crop % max(args.factors):
+        raise UsageError(f"--crop {args.crop} must be a multiple of every factor; got --factors {args.factors}")
+    cfg = RefinerConfig(out=args.out, data=args.data, source=args.source, base=json.loads(args.base), factors=tuple(args.factors),
+                        noises=tuple(args.noises), synthetic=args.synthetic, val_scenes=tuple(args.val_scenes),
+                        channels=args.channels, layers=args.layers, steps=args.steps, batch_size=args.batch_size,
+                        crop=args.crop, lr=args.lr, val_every=args.val_every, seed=args.seed, threads=args.threads,
+                        progress=not args.no_progress)
+    train_refiner(cfg)
+    print(f"best model: {cfg.out}/best  (DepthRestorer.load('{cfg.out}/best'))")
+    return 0
+
+
+def add_train_refiner_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Add the ``train-refiner`` sub-command."""
+    p = subparsers.add_parser("train-refiner", help="learn the edge refiner of guided upsampling on the frozen "
+                                                    "model's outputs")
+    _add_refiner_arguments(p)
+    p.set_defaults(func=cmd_train_refiner)
     return p
 
 

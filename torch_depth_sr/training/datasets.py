@@ -67,8 +67,12 @@ class CropDataset(Dataset):
             ``'none'``, or a callable taking and returning a sample dict (e.g. a
             :class:`~torch_depth_sr.transforms.Compose` of degradations).
         sigma: Gaussian noise std in grey levels, a number or a ``(min, max)`` range.
-        scale_factor: >1 makes guided-upsampling items: the depth is the area-downsampled
-            (missing-aware) ground truth plus noise σ, ``rgb``/``gt``/``mask`` keep full size.
+        scale_factor: >1 makes guided-upsampling items: the depth is the downsampled (missing-aware) ground
+            truth plus noise σ, ``rgb``/``gt``/``mask`` keep full size.
+        downsample: the kernel of that downsampling, ``"area"`` or ``"bicubic"`` (the ``gdsr`` protocol's;
+            :class:`~torch_depth_sr.transforms.Downsample`).
+        clean_share: probability that an item gets no noise at all (σ = 0), so that one model serves clean and
+            noisy input; the draw comes after the item's others, so ``0`` leaves every item as before.
         seed: base seed of the item draws.
         use_middlebury: set False for synthetic-only (no data needed).
 
@@ -85,11 +89,19 @@ class CropDataset(Dataset):
                  synthetic_share: float = 0.5, synthetic_seed: int = 0, crop: Union[int, Tuple[int, int]] = 96,
                  length: int = 1000, degradation: Union[str, Callable] = "mixed",
                  sigma: Union[float, Tuple[float, float]] = (3.0, 8.0), scale_factor: int = 1, seed: int = 0,
-                 use_middlebury: bool = True, allow_test_years: bool = False) -> None:
+                 use_middlebury: bool = True, allow_test_years: bool = False, downsample: str = "area",
+                 clean_share: float = 0.0) -> None:
         if isinstance(degradation, str) and degradation not in DEGRADATIONS:
             raise DepthSRError(f"degradation={degradation!r}; allowed are {DEGRADATIONS} or a callable.")
         self.crop = (crop, crop) if isinstance(crop, int) else (int(crop[0]), int(crop[1]))
         self.scale_factor = int(scale_factor)
+        from ..transforms import Downsample
+
+        if downsample not in Downsample.KERNELS:
+            raise DepthSRError(f"downsample={downsample!r}; allowed are {Downsample.KERNELS}.")
+        if not 0.0 <= float(clean_share) <= 1.0:
+            raise DepthSRError(f"clean_share={clean_share!r}; allowed is a probability in [0, 1].")
+        self.downsample, self.clean_share = downsample, float(clean_share)
         if self.crop[0] % self.scale_factor or self.crop[1] % self.scale_factor:
             raise DepthSRError(f"crop {self.crop} must be a multiple of scale_factor={self.scale_factor}.")
         self.records = (middlebury_records(root, years, scenes, exclude, allow_test_years)
@@ -151,6 +163,8 @@ class CropDataset(Dataset):
         track = self.degradation
         if track == "mixed":
             track = "paper" if rng.random() < 0.5 else "sensor"
+        if self.clean_share > 0 and rng.random() < self.clean_share:
+            sigma = 0.0
         if s > 1:
             crop = self._downsample(crop, sigma, dseed)
         elif callable(track):
@@ -168,7 +182,7 @@ class CropDataset(Dataset):
     def _downsample(self, crop: dict, sigma: float, dseed: int) -> dict:
         from ..transforms import Downsample
 
-        low = Downsample(self.scale_factor)(crop)["depth"]
+        low = Downsample(self.scale_factor, self.downsample)(crop)["depth"]
         g = torch.Generator().manual_seed(dseed)
         noisy = low + sigma * torch.randn(low.shape, generator=g)
         crop["depth"] = torch.where(low > 0, noisy.clamp_min(1e-3), torch.zeros_like(low))
@@ -179,23 +193,28 @@ def make_datasets(root: Optional[Union[str, Path]] = None, crop: int = 96, train
                   val_length: int = 16, val_scenes: Sequence[str] = ("Cloth4", "Wood2"), synthetic: int = 32,
                   sigma: Union[float, Tuple[float, float]] = (3.0, 8.0), val_sigma: float = 5.0,
                   scale_factor: int = 1, degradation: Union[str, Callable] = "mixed", seed: int = 0,
-                  use_middlebury: bool = True) -> tuple["CropDataset", dict[str, "CropDataset"]]:
+                  use_middlebury: bool = True, downsample: str = "area",
+                  clean_share: float = 0.0) -> tuple["CropDataset", dict[str, "CropDataset"]]:
     """Train set and one validation set per track.
 
     Validation uses the held-out 2006 scenes ``val_scenes`` and held-out synthetic scenes (seeds
     10000+), σ = ``val_sigma``, fixed crops; training uses the other 2006 scenes and synthetic
     seeds 0..``synthetic``-1. Returns ``(train, {"paper": ds, "sensor": ds})`` (or
-    ``{"x<s>": ds}`` for upsampling).
+    ``{"x<s>": ds}`` for upsampling, plus ``"x<s>-clean"`` (σ = 0, same crops) when ``clean_share > 0``).
     """
     train = CropDataset(root, exclude=val_scenes, synthetic=synthetic, crop=crop, length=train_length,
                         degradation=degradation, sigma=sigma, scale_factor=scale_factor, seed=seed,
-                        use_middlebury=use_middlebury)
+                        use_middlebury=use_middlebury, downsample=downsample, clean_share=clean_share)
     vsyn = max(2, synthetic // 8)
     common = dict(scenes=val_scenes, synthetic=vsyn, synthetic_seed=10_000, crop=crop, length=val_length,
                   sigma=val_sigma, scale_factor=scale_factor, seed=seed + 777,
                   use_middlebury=use_middlebury and bool(val_scenes))
     if scale_factor > 1:
-        return train, {f"x{scale_factor}": CropDataset(root, degradation="none", **common)}
+        val = {f"x{scale_factor}": CropDataset(root, degradation="none", downsample=downsample, **common)}
+        if clean_share > 0:
+            val[f"x{scale_factor}-clean"] = CropDataset(root, degradation="none", downsample=downsample,
+                                                        **{**common, "sigma": 0.0})
+        return train, val
     return train, {t: CropDataset(root, degradation=t, **common) for t in ("paper", "sensor")}
 
 

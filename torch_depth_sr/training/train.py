@@ -57,6 +57,8 @@ class TrainConfig:
     sigma: tuple = (3.0, 8.0)
     val_sigma: float = 5.0
     scale_factor: int = 1
+    downsample: str = "area"  # upsampling inputs: "area" or "bicubic" (the gdsr protocol's kernel)
+    clean_share: float = 0.0  # probability of a noise-free item (upsampling validation adds a clean set when > 0)
     synthetic: int = 32
     use_middlebury: bool = True
     val_scenes: tuple = ("Cloth4", "Wood2")
@@ -243,7 +245,8 @@ def train(cfg: TrainConfig) -> DepthRestorer:
                                        val_length=cfg.val_size, val_scenes=cfg.val_scenes, synthetic=cfg.synthetic,
                                        sigma=cfg.sigma, val_sigma=cfg.val_sigma, scale_factor=cfg.scale_factor,
                                        degradation=cfg.degradation, seed=cfg.seed,
-                                       use_middlebury=cfg.use_middlebury)
+                                       use_middlebury=cfg.use_middlebury, downsample=cfg.downsample,
+                                       clean_share=cfg.clean_share)
     loader = DataLoader(train_ds, batch_size=cfg.batch_size,
                         sampler=_StepSampler(start, end, cfg.batch_size, rank, world),
                         num_workers=cfg.num_workers, drop_last=False,

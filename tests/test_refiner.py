@@ -1,0 +1,162 @@
+"""The edge refiner of guided upsampling (issue 14): its clamp, its unit-freedom, where the model runs it, its
+training command, the bicubic training degradation, and (with the data) the shipped model's effect."""
+import json
+
+import pytest
+import torch
+
+from torch_depth_sr import DepthRestorer
+from torch_depth_sr._data_root import data_root
+from torch_depth_sr.cli import main
+from torch_depth_sr.datasets.synthetic import make_scene
+from torch_depth_sr.refiner import EdgeRefiner
+from torch_depth_sr.training.datasets import CropDataset
+from torch_depth_sr.transforms import Downsample
+
+
+def _random_refiner(seed=0, channels=8, layers=2):
+    torch.manual_seed(seed)
+    ref = EdgeRefiner(channels, layers)
+    for p in ref.parameters():  # a network that says something (the shipped last layer starts at 0)
+        torch.nn.init.normal_(p, std=0.3)
+    return ref
+
+
+def _inputs(seed=0, factor=4, h=32, w=40):
+    g = torch.Generator().manual_seed(seed)
+    x = 50 + 40 * torch.rand(2, 1, h, w, generator=g)
+    lr = 50 + 40 * torch.rand(2, 1, h // factor, w // factor, generator=g)
+    rgb = torch.rand(2, 3, h, w, generator=g)
+    return x, lr, rgb
+
+
+def test_output_stays_within_the_measured_range_around_each_pixel():
+    ref = _random_refiner()
+    x, lr, rgb = _inputs()
+    out = ref(x, lr, rgb)
+    lo, hi = EdgeRefiner.bounds(lr, 4)
+    assert bool((out >= lo).all() and (out <= hi).all())
+    # the bounds are the 3×3 cells' min / max: a pixel of cell (1, 1) is bounded by lr[0:3, 0:3]
+    assert torch.equal(lo[0, 0, 5, 6], lr[0, 0, 0:3, 0:3].min()) and torch.equal(hi[0, 0, 5, 6], lr[0, 0, 0:3, 0:3].max())
+    assert not torch.allclose(out, torch.minimum(torch.maximum(x, lo), hi))  # the network acts
+
+
+def test_refiner_does_not_depend_on_the_depth_unit():
+    ref = _random_refiner(1).double()
+    x, lr, rgb = (v.double() for v in _inputs(1))
+    a, b = 1000.0, -20.0
+    out = ref(x, lr, rgb)
+    assert torch.allclose(ref(a * x + b, a * lr + b, rgb), a * out + b, rtol=1e-9, atol=1e-6)
+
+
+def test_untrained_refiner_is_the_clamp_and_keeps_the_input():
+    ref = EdgeRefiner(8, 1)
+    x, lr, rgb = _inputs(2)
+    before = x.clone()
+    lo, hi = ref.bounds(lr, 4)
+    assert torch.equal(ref(x, lr, rgb), torch.minimum(torch.maximum(x, lo), hi))
+    assert torch.equal(x, before)
+
+
+def test_model_runs_the_refiner_only_when_upsampling(tmp_path):
+    s = make_scene(64, 80, seed=3)
+    plain = DepthRestorer(degradation="bicubic", num_layers=2).eval()
+    refined = DepthRestorer(degradation="bicubic", num_layers=2, refine_net=True, refine_channels=8,
+                            refine_layers=1).eval()
+    refined.load_state_dict({**plain.state_dict(), **{f"refiner.{k}": v for k, v in
+                                                      _random_refiner(4, 8, 1).state_dict().items()}})
+    noisy = (s["gt"] + 3 * torch.randn_like(s["gt"])).clamp_min(1)[None]
+    with torch.no_grad():  # denoising (K = I): the refiner does not run
+        assert torch.equal(plain(noisy, s["rgb"][None]), refined(noisy, s["rgb"][None]))
+        low = Downsample(4, "bicubic")({"depth": s["gt"][None]})["depth"]
+        a, b = plain(low, s["rgb"][None]), refined(low, s["rgb"][None])
+    assert not torch.allclose(a, b)
+    lo, hi = EdgeRefiner.bounds(low, 4)
+    assert bool((b >= lo - 1e-4).all() and (b <= hi + 1e-4).all())
+    refined.save(tmp_path / "m")  # the weights travel with the model folder
+    again = DepthRestorer.load(tmp_path / "m").eval()
+    with torch.no_grad():
+        assert torch.equal(again(low, s["rgb"][None]), b)
+
+
+def test_bicubic_downsample_is_the_protocol_resize_and_ignores_holes():
+    from torch_depth_sr.evaluation.gdsr import resize_pillow
+
+    s = make_scene(64, 80, seed=5)
+    full = Downsample(4, "bicubic")({"depth": s["gt"]})["depth"]
+    assert torch.allclose(full[None], resize_pillow(s["gt"][None], (16, 20)), atol=1e-4)
+    holey = s["gt"].clone()
+    holey[:, 20:40, 20:40] = 0  # a hole: its cells are missing, the cells around it are not pulled towards 0
+    out = Downsample(4, "bicubic")({"depth": holey})["depth"]
+    assert bool((out[:, 6:9, 6:9] == 0).all())
+    measured = out > 0
+    assert float(out[measured].min()) >= float(s["gt"].min()) - 5
+    with pytest.raises(Exception, match="kernel"):
+        Downsample(4, "nearest")
+
+
+def test_clean_share_makes_noise_free_items_and_zero_keeps_the_old_items():
+    common = dict(use_middlebury=False, synthetic=2, synthetic_size=(64, 64), crop=32, length=6, scale_factor=4)
+    old = CropDataset(**common)
+    zero = CropDataset(**common, clean_share=0.0)
+    clean = CropDataset(**common, clean_share=1.0, downsample="bicubic")
+    for i in range(6):
+        assert torch.equal(old[i]["depth"], zero[i]["depth"])
+        c = clean[i]
+        expected = Downsample(4, "bicubic")({"depth": c["gt"]})["depth"]
+        assert torch.allclose(c["depth"], expected.clamp_min(1e-3), atol=1e-5)
+    with pytest.raises(Exception, match="clean_share"):
+        CropDataset(**common, clean_share=1.5)
+
+
+def test_train_refiner_command_runs_and_exports_a_model(tmp_path, monkeypatch):
+    monkeypatch.setenv("TORCH_DEPTH_SR_DATA", str(tmp_path / "no-data"))
+    out = tmp_path / "run"
+    rc = main(["train-refiner", "--out", str(out), "--factors", "4", "--noises", "0", "--synthetic", "1",
+               "--channels", "4", "--layers", "1", "--steps", "3", "--val-every", "3", "--batch-size", "2",
+               "--crop", "32", "--base", '{"degradation": "bicubic", "num_layers": 1}', "--no-progress"])
+    assert rc == 0
+    history = json.loads((out / "history.json").read_text())
+    assert [r["step"] for r in history["history"]] == [0, 3] and history["parameters"] > 0
+    model = DepthRestorer.load(out / "best")
+    assert model.refiner is not None and model.config.num_layers == 1
+
+
+def test_train_refiner_refuses_a_crop_that_no_factor_divides(capsys):
+    assert main(["train-refiner", "--factors", "16", "--crop", "40"]) != 0
+    assert "--crop 40" in capsys.readouterr().err
+
+
+def test_shipped_upsampler_beats_bicubic_and_the_frozen_model_on_a_held_out_image():
+    """Middlebury Art (never trained on), ×4 clean and σ = 5, by the gdsr protocol."""
+    from torch_depth_sr.datasets.gdsr import gdsr_images
+    from torch_depth_sr.evaluation.gdsr import _run_model, bicubic, degrade, make_model, rmse
+
+    root = data_root()
+    if not (root / "guided_dsr_testsets_dctnet" / "Middlebury").is_dir():
+        pytest.skip(f"gdsr test sets not found under {root} (set TORCH_DEPTH_SR_DATA)")
+    img = next(gdsr_images(root, "Middlebury", only=["02"]))
+    assert img.heldout
+    for noise in (0, 5):
+        sample = degrade(img, 4, noise)
+        gt = sample["gt"]
+        e_bicubic = rmse(bicubic(sample["lr"], gt.shape[-2:]), gt, "Middlebury")
+        e_full = rmse(_run_model(make_model("full", 4), sample, "cpu"), gt, "Middlebury")
+        e_trained = rmse(_run_model(make_model("trained", 4), sample, "cpu"), gt, "Middlebury")
+        assert e_trained < e_full < e_bicubic, (noise, e_trained, e_full, e_bicubic)
+        assert e_trained < 0.9 * e_full
+
+
+def test_gdsr_source_reads_only_the_2006_fitting_files():
+    from torch_depth_sr.datasets.gdsr import FITTING, MIDDLEBURY_SCENES
+    from torch_depth_sr.training.refiner import RefinerConfig, _scenes
+
+    root = data_root()
+    if not (root / "guided_dsr_testsets_dctnet" / "Middlebury").is_dir():
+        pytest.skip(f"gdsr test sets not found under {root} (set TORCH_DEPTH_SR_DATA)")
+    train, valid = _scenes(RefinerConfig(source="gdsr", synthetic=0, data=str(root)))
+    fitting = {MIDDLEBURY_SCENES[i] for i in FITTING}
+    assert {s["name"] for s in valid} == {"Cloth4", "Wood2"}
+    assert {s["name"] for s in train} == fitting - {"Cloth4", "Wood2"}
+    with pytest.raises(ValueError, match="source"):
+        _scenes(RefinerConfig(source="nyu", synthetic=0, data=str(root)))

@@ -1,0 +1,95 @@
+r"""A learned correction of the upsampled output at depth edges, bounded by the low-resolution measurements.
+
+Issue 14 ("accurate like the deep networks"). On a clean low-resolution input the unrolled model is held to its x⁰
+away from depth edges (do no harm), and at the edges it cannot tell from a blend of two surfaces where, inside the
+``s×s`` cell, the boundary runs: the colour image says it, but only a learned rule reads it well (DJF, DKN and
+DCTNet learn it from data). :class:`EdgeRefiner` learns that rule on top of the model: a small residual CNN reads the
+model's output, the bicubic interpolation of the input and the colour image, and adds a correction, which is then
+clamped to the range of the low-resolution values in the 3×3 neighbourhood of the pixel's cell:
+
+.. math::
+    \hat x = \operatorname{clamp}\big(x + r\,f_\theta(\phi),\ \min_{N_3(c)} y,\ \max_{N_3(c)} y\big)
+
+with :math:`r` the depth range of the input (so the network never sees the depth's unit) and :math:`\phi` the
+features (all divided by :math:`r/10`): ``x`` minus its 7×7 mean, bicubic minus ``x``, the distances of ``x`` to
+the clamp's two bounds, and the colour image centred on its mean. The clamp is what keeps the promise "no surface
+that is not there": the output never leaves the values measured around it, whatever the network says.
+
+The last convolution is zero-initialised: untrained, the refiner returns ``x`` (clamped). It runs only when the
+model upsamples (``K ≠ I``) and a colour image is given; it is trained on the frozen model's outputs
+(:mod:`torch_depth_sr.training.refiner`), the model's own parameters stay as they are.
+"""
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+__all__ = ["EdgeRefiner", "REFINER_FEATURES"]
+
+REFINER_FEATURES = 7
+"""Input channels of the network: four depth features and the three colour channels."""
+
+_FEATURE_GAIN = 10.0  # features and output in units of r/10: a depth edge spans a few units, as the colour does
+
+
+class EdgeRefiner(nn.Module):
+    """The refiner of :mod:`torch_depth_sr.refiner`: ``layers`` hidden 3×3 convolutions of ``channels`` features.
+
+    Args:
+        channels: width of the hidden layers.
+        layers: number of hidden 3×3 convolutions (after the first).
+
+    Examples:
+        >>> ref = EdgeRefiner(channels=8, layers=1)
+        >>> x, lr, rgb = torch.rand(1, 1, 16, 16), torch.rand(1, 1, 4, 4), torch.rand(1, 3, 16, 16)
+        >>> lo, hi = ref.bounds(lr, 4)
+        >>> bool(torch.equal(ref(x, lr, rgb), torch.minimum(torch.maximum(x, lo), hi)))  # untrained: clamp only
+        True
+    """
+
+    def __init__(self, channels: int = 32, layers: int = 6) -> None:
+        super().__init__()
+        body: list[nn.Module] = [nn.Conv2d(REFINER_FEATURES, channels, 3, padding=1), nn.ReLU()]
+        for _ in range(layers):
+            body += [nn.Conv2d(channels, channels, 3, padding=1), nn.ReLU()]
+        body.append(nn.Conv2d(channels, 1, 3, padding=1))
+        nn.init.zeros_(body[-1].weight)
+        nn.init.zeros_(body[-1].bias)
+        self.body = nn.Sequential(*body)
+
+    @staticmethod
+    def bounds(lowres: torch.Tensor, factor: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """The clamp's bounds on the fine grid: min and max of ``lowres`` over the 3×3 cells around each pixel's."""
+        lo = -F.max_pool2d(-lowres, 3, 1, 1)
+        hi = F.max_pool2d(lowres, 3, 1, 1)
+        return (F.interpolate(lo, scale_factor=factor, mode="nearest"),
+                F.interpolate(hi, scale_factor=factor, mode="nearest"))
+
+    def features(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor, lo: torch.Tensor,
+                 hi: torch.Tensor, unit: torch.Tensor) -> torch.Tensor:
+        """The network's input (B, 7, H, W); ``unit`` (B,1,1,1) is r/10."""
+        bicubic = F.interpolate(lowres, size=x.shape[-2:], mode="bicubic", antialias=True, align_corners=False)
+        local = x - F.avg_pool2d(x, 7, 1, 3, count_include_pad=False)
+        depth = torch.cat([local, bicubic - x, hi - x, x - lo], 1) / unit
+        return torch.cat([depth, rgb - rgb.mean((-2, -1), keepdim=True)], 1)
+
+    def prepare(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``(features, lo, hi, unit)`` of a whole image: what :meth:`correct` reads (training crops them)."""
+        factor = x.shape[-1] // lowres.shape[-1]
+        lo, hi = self.bounds(lowres, factor)
+        r = lowres.amax((-2, -1), keepdim=True) - lowres.amin((-2, -1), keepdim=True)
+        unit = (r / _FEATURE_GAIN).clamp_min(torch.finfo(x.dtype).eps)
+        return self.features(x, lowres, rgb.to(x.dtype), lo, hi, unit), lo, hi, unit
+
+    def correct(self, x: torch.Tensor, phi: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+                unit: torch.Tensor) -> torch.Tensor:
+        """``x`` plus the network's step (in units of ``unit``), clamped to ``[lo, hi]``."""
+        step = self.body(phi.to(self.body[0].weight.dtype)).to(x.dtype) * unit
+        return torch.minimum(torch.maximum(x + step, lo), hi)
+
+    def forward(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
+        """``x`` (B,1,H,W) the model's output, ``lowres`` (B,1,H/s,W/s) the input with no missing value (the model
+        fills its holes from ``x``), ``rgb`` (B,3,H,W) in [0, 1]. Returns the refined (B,1,H,W), in ``x``'s dtype."""
+        return self.correct(x, *self.prepare(x, lowres, rgb))

@@ -1,0 +1,218 @@
+"""Training the edge refiner (:mod:`torch_depth_sr.refiner`) on the frozen model's upsampled outputs.
+
+The unrolled model is too slow on this CPU to be trained end to end with a CNN after it, and it does not need to
+be: its parameters stay as they are, so its outputs are computed once per training image (full images, every
+factor and noise level) and the refiner learns on random crops of them. Data, as for every trained parameter of the
+project: the Middlebury 2006 scenes (two held out for validation) and procedural synthetic scenes.
+
+Degradation (the ``gdsr`` protocol, ``shared/docs/benchmark.md``): crop to a multiple of ``s``, antialiased
+bicubic downsampling (mask-aware, :class:`~torch_depth_sr.transforms.Downsample`), Gaussian noise of σ = ``noise``
+on a 0–255 scale of the image's ground-truth range on the measured low-resolution pixels.
+
+Output: ``<out>/best`` and ``<out>/last``, :meth:`DepthRestorer.save` folders of the base model with
+``refine_net=True`` and the refiner's weights, and ``<out>/history.json``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+
+from ..model import DepthRestorer
+from ..operators import degradation_operator
+from ..refiner import EdgeRefiner
+from ..transforms import Downsample
+from .datasets import middlebury_records
+
+__all__ = ["RefinerConfig", "degrade_for_refiner", "train_refiner"]
+
+
+@dataclass
+class RefinerConfig:
+    """Settings of :func:`train_refiner` (the CLI flags mirror these names)."""
+    out: str = "runs/refiner"
+    # the Middlebury 2006 scenes as "middlebury2006" (the project's copy: official third-size maps with their holes)
+    # or as "gdsr" (the files of the same eleven scenes in the guided-SR test set, filled and in that set's own
+    # rendering of the ground truth, which differs from the official maps at depth edges)
+    source: str = "middlebury2006"
+    base: dict = field(default_factory=lambda: {"degradation": "bicubic"})  # RestorerConfig of the frozen model
+    factors: tuple = (4, 8, 16)
+    noises: tuple = (0.0, 5.0, 10.0)  # σ on a 0–255 scale of each image's ground-truth range
+    synthetic: int = 16  # procedural scenes (seeds 0..n−1), 240×320
+    val_scenes: tuple = ("Cloth4", "Wood2")
+    channels: int = 32
+    layers: int = 6
+    steps: int = 2000
+    batch_size: int = 16
+    crop: int = 64
+    lr: float = 1e-3
+    val_every: int = 250
+    seed: int = 0
+    threads: int = 1
+    data: Optional[str] = None
+    progress: bool = True
+
+
+def degrade_for_refiner(gt: torch.Tensor, mask: torch.Tensor, factor: int, noise: float,
+                        generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``gt``, ``mask`` (1,1,H,W) → the cropped ``gt``, ``mask`` and the low-resolution input (0 where missing)."""
+    h, w = (gt.shape[-2] // factor) * factor, (gt.shape[-1] // factor) * factor
+    gt, mask = gt[..., :h, :w], mask[..., :h, :w]
+    low = Downsample(factor, "bicubic")({"depth": gt * (mask > 0)})["depth"]
+    measured = gt[mask > 0]
+    span = float(measured.max() - measured.min()) if measured.numel() else 0.0
+    noisy = low + noise * span / 255.0 * torch.randn(low.shape, generator=generator)
+    low = torch.where(low > 0, noisy.clamp_min(1e-3), torch.zeros_like(low))
+    return gt, mask, low
+
+
+def _scenes(cfg: RefinerConfig) -> tuple[list[dict], list[dict]]:
+    from ..datasets.synthetic import make_scene
+
+    val = {s.lower() for s in cfg.val_scenes}
+    train, valid = [], []
+    if cfg.source == "gdsr":
+        from .._data_root import data_root
+        from ..datasets.gdsr import FITTING, FOLDER, MIDDLEBURY_SCENES, gdsr_images
+
+        root = Path(cfg.data) if cfg.data else data_root()
+        if (root / FOLDER / "Middlebury").is_dir():
+            for img in gdsr_images(root, "Middlebury", only=sorted(FITTING)):  # never a held-out file
+                gt = torch.from_numpy(img.depth)[None]
+                s = {"gt": gt, "mask": (gt > 0).float(), "name": MIDDLEBURY_SCENES[img.index],
+                     "rgb": torch.from_numpy(img.rgb.copy()).permute(2, 0, 1).float() / 255}
+                (valid if s["name"].lower() in val else train).append(s)
+    elif cfg.source == "middlebury2006":
+        for r in middlebury_records(cfg.data):
+            s = r.load()
+            (valid if r.name.lower() in val else train).append({k: s[k] for k in ("rgb", "gt", "mask", "name")})
+    else:
+        raise ValueError(f"source={cfg.source!r}; allowed are 'middlebury2006' and 'gdsr'")
+    for j in range(cfg.synthetic):
+        s = make_scene(240, 320, seed=j)
+        train.append({k: s[k] for k in ("rgb", "gt", "mask", "name")})
+    if not valid:  # no Middlebury data here (CI): validate on two held-out synthetic scenes
+        valid = [{k: s[k] for k in ("rgb", "gt", "mask", "name")}
+                 for s in (make_scene(240, 320, seed=10_000 + j) for j in range(2))]
+    return train, valid
+
+
+@torch.no_grad()
+def _samples(base: DepthRestorer, refiner: EdgeRefiner, scenes: list[dict], cfg: RefinerConfig,
+             tag: str) -> list[dict]:
+    """The frozen model's output on every scene × factor × noise and the refiner's whole-image inputs."""
+    from tqdm import tqdm
+
+    out = []
+    jobs = [(s, f, n) for s in scenes for f in cfg.factors for n in cfg.noises]
+    for i, (s, f, n) in enumerate(tqdm(jobs, desc=f"model outputs ({tag})", disable=not cfg.progress)):
+        g = torch.Generator().manual_seed(cfg.seed * 100_003 + i)
+        gt, mask, low = degrade_for_refiner(s["gt"][None], s["mask"][None], f, n, g)
+        rgb = s["rgb"][None, :, : gt.shape[-2], : gt.shape[-1]]
+        lr = torch.where(low > 0, low, torch.full_like(low, float("nan")))
+        x = base(lr, rgb).float()
+        filled = torch.where(low > 0, low, degradation_operator(base.degradation, f)(x))
+        phi, lo, hi, unit = refiner.prepare(x, filled, rgb)
+        out.append({"x": x, "phi": phi, "lo": lo, "hi": hi, "unit": unit, "gt": gt, "mask": mask,
+                    "factor": f, "noise": n, "name": f"{s['name']}/x{f}/n{n:g}"})
+    return out
+
+
+_CROPPED = ("x", "phi", "lo", "hi", "gt", "mask")
+
+
+def _crop_batch(samples: list[dict], cfg: RefinerConfig, rng: np.random.Generator) -> dict:
+    """``batch_size`` random crops (at multiples of the factor, optionally mirrored), stacked."""
+    parts: dict = {k: [] for k in (*_CROPPED, "unit")}
+    c = cfg.crop
+    for _ in range(cfg.batch_size):
+        s = samples[int(rng.integers(len(samples)))]
+        f = s["factor"]
+        h, w = s["x"].shape[-2:]
+        i = int(rng.integers(0, (h - c) // f + 1)) * f
+        j = int(rng.integers(0, (w - c) // f + 1)) * f
+        flip = rng.random() < 0.5
+        for k in _CROPPED:
+            v = s[k][..., i: i + c, j: j + c]
+            parts[k].append(v.flip(-1) if flip else v)
+        parts["unit"].append(s["unit"])
+    return {k: torch.cat(v) for k, v in parts.items()}
+
+
+def _loss(refiner: EdgeRefiner, batch: dict) -> torch.Tensor:
+    """L1 error on known pixels in units of each image's ``unit`` (unit-free), mean over the batch's pixels."""
+    pred = refiner.correct(batch["x"], batch["phi"], batch["lo"], batch["hi"], batch["unit"])
+    valid = (batch["mask"] > 0).to(pred.dtype)
+    return ((pred - batch["gt"]).abs() / batch["unit"] * valid).sum() / valid.sum().clamp_min(1)
+
+
+@torch.no_grad()
+def _validate(refiner: EdgeRefiner, samples: list[dict]) -> dict:
+    """Mean RMSE over the validation samples (known pixels) of the refined and the unrefined outputs."""
+    refined, plain = [], []
+    for s in samples:
+        valid = s["mask"] > 0
+        pred = refiner.correct(s["x"], s["phi"], s["lo"], s["hi"], s["unit"])
+        refined.append(float((pred - s["gt"])[valid].square().mean().sqrt()))
+        plain.append(float((s["x"] - s["gt"])[valid].square().mean().sqrt()))
+    return {"rmse": float(np.mean(refined)), "rmse_model": float(np.mean(plain))}
+
+
+def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
+    model = DepthRestorer(base.config.replace(refine_net=True, refine_channels=cfg.channels,
+                                              refine_layers=cfg.layers))
+    state = {**base.state_dict(), **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}}
+    model.load_state_dict(state)
+    model.save(folder)
+
+
+def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
+    """Compute the frozen model's outputs, train the refiner on crops of them, export the best by validation."""
+    torch.set_num_threads(max(1, cfg.threads))
+    torch.manual_seed(cfg.seed)
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "refiner_config.json").write_text(json.dumps(asdict(cfg), indent=2))
+    base = DepthRestorer(**cfg.base).eval()
+    train_scenes, val_scenes = _scenes(cfg)
+    t0 = time.perf_counter()
+    refiner = EdgeRefiner(cfg.channels, cfg.layers)
+    train_samples = _samples(base, refiner, train_scenes, cfg, "training")
+    val_samples = _samples(base, refiner, val_scenes, cfg, "validation")
+    prepare_seconds = time.perf_counter() - t0
+    opt = torch.optim.Adam(refiner.parameters(), lr=cfg.lr)
+    rng = np.random.default_rng(cfg.seed)
+    history = [{"step": 0, **_validate(refiner, val_samples)}]
+    best = {"step": 0, "rmse": history[0]["rmse"]}
+    _export(base, refiner, cfg, out / "best")
+    from tqdm import tqdm
+
+    bar = tqdm(range(1, cfg.steps + 1), desc="train refiner", disable=not cfg.progress)
+    t1 = time.perf_counter()
+    for step in bar:
+        for g in opt.param_groups:  # cosine from lr to lr/10
+            g["lr"] = cfg.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * (step - 1) / cfg.steps)))
+        loss = _loss(refiner, _crop_batch(train_samples, cfg, rng))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        bar.set_postfix(loss=f"{loss.item():.4g}")
+        if step % cfg.val_every == 0 or step == cfg.steps:
+            row = {"step": step, **_validate(refiner, val_samples), "seconds": time.perf_counter() - t1}
+            history.append(row)
+            bar.write(f"step {step:>5d}  val rmse {row['rmse']:.4f} (model alone {row['rmse_model']:.4f})")
+            if row["rmse"] < best["rmse"]:
+                best = {"step": step, "rmse": row["rmse"]}
+                _export(base, refiner, cfg, out / "best")
+    _export(base, refiner, cfg, out / "last")
+    (out / "history.json").write_text(json.dumps({"history": history, "best": best,
+                                                  "prepare_seconds": prepare_seconds,
+                                                  "parameters": sum(p.numel() for p in refiner.parameters())},
+                                                 indent=2))
+    return refiner
