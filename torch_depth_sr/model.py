@@ -265,7 +265,7 @@ class DepthRestorer(nn.Module):
                                 white.to(sigma) / scale)
             if self.refiner is not None and guide is not None:
                 with stage(ctx.log.timings, "refine", x.device):  # holes of the input: what the model made of them
-                    x = self.refiner(x, torch.where(observed > 0, yn, K(x)), guide)
+                    x = self.refiner(x, torch.where(observed > 0, yn, K(x)), guide, white.to(x) / scale)
         if timed:
             if x.device.type == "cuda":
                 torch.cuda.synchronize(x.device)

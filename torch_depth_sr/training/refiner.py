@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from ..model import DepthRestorer
+from ..noise import white_noise_sigma
 from ..operators import degradation_operator
 from ..refiner import EdgeRefiner
 from ..transforms import Downsample
@@ -118,7 +119,8 @@ def _samples(base: DepthRestorer, refiner: EdgeRefiner, scenes: list[dict], cfg:
         lr = torch.where(low > 0, low, torch.full_like(low, float("nan")))
         x = base(lr, rgb).float()
         filled = torch.where(low > 0, low, degradation_operator(base.degradation, f)(x))
-        phi, lo, hi, unit = refiner.prepare(x, filled, rgb)
+        level = white_noise_sigma(low, (low > 0).to(low))  # what the model hands its refiner
+        phi, lo, hi, unit = refiner.prepare(x, filled, rgb, level)
         out.append({"x": x, "phi": phi, "lo": lo, "hi": hi, "unit": unit, "gt": gt, "mask": mask,
                     "factor": f, "noise": n, "name": f"{s['name']}/x{f}/n{n:g}"})
     return out
