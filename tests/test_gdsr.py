@@ -198,6 +198,7 @@ def test_models_run_on_the_protocols_input():
     assert make_model("trained-x4", 4) is not None  # upsample-x4 ships
     assert make_model("trained-x4", 16) is None  # nothing ships for x16
     assert all(make_model("trained", s).refiner is not None for s in (4, 16))  # "upsample": one for every factor
+    assert make_model("trained-x4-refined", 4).refiner is not None and make_model("trained-x4-refined", 8) is None
 
 
 def test_cli_rows(tmp_path, capsys, monkeypatch):

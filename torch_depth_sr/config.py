@@ -550,7 +550,9 @@ class UpsamplingConfig(_Group):
     :func:`~torch_depth_sr.operators.degradation_operator`), x⁰ on the fine grid (``init``: ``"jbu"`` held within
     ``init_band`` noise σ plus ``init_edge_band`` times the depth-edge evidence of bicubic interpolation, or
     ``"bicubic"``; :func:`~torch_depth_sr.upsampling.upsample_initial`) and the layer weights' policy
-    (:meth:`layer_weights`). Flat fields ``degradation`` and ``upsample_*``."""
+    (:meth:`layer_weights`), and the learned edge refiner after the model (``refine``, ``refine_channels`` wide,
+    ``refine_layers`` hidden convolutions; :mod:`~torch_depth_sr.refiner`). Flat fields ``degradation``,
+    ``upsample_*`` and ``refine_*``."""
 
     degradation: str
     init: str
@@ -563,13 +565,17 @@ class UpsamplingConfig(_Group):
     jbu: JBUConfig
     tv_per_factor: bool
     multipliers: LayerMultipliers
+    refine: bool
+    refine_channels: int
+    refine_layers: int
     _FLAT: ClassVar[dict] = {"degradation": "degradation", "init": "upsample_init", "init_band": "upsample_init_band",
                              "init_edge_band": "upsample_init_edge_band",
                              "init_consistency": "upsample_init_consistency", "jbu": "upsample_jbu",
                              "output_band": "upsample_output_band", "output_edge": "upsample_output_edge",
                              "output_edge_threshold": "upsample_output_edge_threshold",
                              "tv_per_factor": "upsample_tv_per_factor",
-                             "multipliers": "upsample_scale"}
+                             "multipliers": "upsample_scale", "refine": "refine_net",
+                             "refine_channels": "refine_channels", "refine_layers": "refine_layers"}
 
     @classmethod
     def from_config(cls, c: RestorerConfig) -> "UpsamplingConfig":
@@ -579,7 +585,8 @@ class UpsamplingConfig(_Group):
                    output_edge_threshold=c.upsample_output_edge_threshold,
                    jbu=JBUConfig(**c.upsample_jbu),
                    tv_per_factor=c.upsample_tv_per_factor,
-                   multipliers=LayerMultipliers(**c.upsample_scale))
+                   multipliers=LayerMultipliers(**c.upsample_scale), refine=c.refine_net,
+                   refine_channels=c.refine_channels, refine_layers=c.refine_layers)
 
     def to_flat(self) -> dict:
         d = super().to_flat()

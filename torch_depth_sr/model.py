@@ -124,8 +124,9 @@ class DepthRestorer(nn.Module):
                                         config.guidance_range).requires_grad_(trainable)
         # upsampling only: the learned, clamped correction at depth edges (issue 14); None = no state-dict keys
         self.refiner: Optional[EdgeRefiner] = None
-        if config.refine_net:
-            self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers).requires_grad_(trainable)
+        up = config.upsampling
+        if up.refine:
+            self.refiner = EdgeRefiner(up.refine_channels, up.refine_layers).requires_grad_(trainable)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod

@@ -15,7 +15,8 @@ trained --json F`` runs, per image of each set (:mod:`torch_depth_sr.datasets.gd
    input, DCTNet's ``DepthLrUp``); ``full`` = the frozen :class:`~torch_depth_sr.DepthRestorer` (defaults of
    ``ablation("full")``) with ``degradation="bicubic"`` (the K of this protocol) plus any ``--config``
    overrides; ``trained`` = the shipped ``from_pretrained("upsample")`` (the frozen model plus the edge refiner,
-   one model for every factor; ``--pretrained FOLDER`` evaluates a saved candidate instead); ``trained-x4`` =
+   one model for every factor; ``--pretrained FOLDER`` evaluates a saved candidate instead);
+   ``trained-x4-refined`` = ``from_pretrained("upsample-x4-refined")``, a wider refiner for ×4 only; ``trained-x4`` =
    the older ``from_pretrained("upsample-x{s}")``, a row marked not available where no such model ships. The models get the low-resolution depth in the protocol's units and
    the full-resolution colour; input values <= 0 are missing. For the real scene, whose input is 192x144 for a
    512x384 grid (factor 8/3, not an integer), the models get the input resized to 128x96 (Pillow bicubic) and
@@ -52,7 +53,7 @@ if TYPE_CHECKING:
 __all__ = ["METHODS", "REAL_SCALE", "crop_to_multiple", "resize_pillow", "add_noise", "degrade", "bicubic",
            "rmse", "make_model", "run_gdsr", "summarise_gdsr"]
 
-METHODS = ("bicubic", "full", "trained", "trained-x4")
+METHODS = ("bicubic", "full", "trained", "trained-x4-refined", "trained-x4")
 REAL_SCALE = 4  # RGBDD_Test_Realscene: the models upsample x4 (input resized to a quarter of the HR grid)
 NOISE_SEED = 0
 GREY_SETS = ("Middlebury", "Lu")
@@ -138,8 +139,11 @@ def make_model(method: str, scale: int, config: Optional[dict] = None, device: s
 
     if method == "full":
         return DepthRestorer.ablation("full", **{"degradation": "bicubic", **(config or {})}).to(device).eval()
-    if method == "trained":
-        model = DepthRestorer.load(pretrained) if pretrained else DepthRestorer.from_pretrained("upsample")
+    if method in ("trained", "trained-x4-refined"):
+        name = "upsample" if method == "trained" else "upsample-x4-refined"
+        if method == "trained-x4-refined" and scale != 4 and not pretrained:
+            return None
+        model = DepthRestorer.load(pretrained) if pretrained else DepthRestorer.from_pretrained(name)
         return model.to(device).eval()
     if method == "trained-x4":
         try:
@@ -227,7 +231,7 @@ def run_gdsr(args: argparse.Namespace, config: Optional[dict] = None) -> int:
                     pred = None if models[key] is None else _run_model(models[key], sample, device)
                 if pred is None:
                     row.update(rmse=None, available=False, seconds=None,
-                               note=f"no shipped upsample-x{sample['factor']} model")
+                               note=f"no shipped {m} model for x{sample['factor']}")
                 else:
                     row.update(rmse=rmse(pred, gt, img.dataset), available=True,
                                seconds=time.perf_counter() - t0)
