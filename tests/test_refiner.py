@@ -160,3 +160,20 @@ def test_gdsr_source_reads_only_the_2006_fitting_files():
     assert {s["name"] for s in train} == fitting - {"Cloth4", "Wood2"}
     with pytest.raises(ValueError, match="source"):
         _scenes(RefinerConfig(source="nyu", synthetic=0, data=str(root)))
+
+
+def test_shipped_upsampler_treats_each_sample_of_a_batch_on_its_own():
+    """Per-sample range, noise level and bounds: a batch gives what its samples give alone (float64 too)."""
+    model = DepthRestorer.from_pretrained("upsample").eval()
+    scenes = [make_scene(64, 80, seed=s) for s in (1, 2)]
+    lows = [Downsample(4, "bicubic")({"depth": s["gt"][None]})["depth"] for s in scenes]
+    torch.manual_seed(0)
+    lows[1] = lows[1] * 10 + 3 * torch.randn_like(lows[1])  # another unit, and noisy
+    rgb = torch.stack([s["rgb"] for s in scenes])
+    with torch.no_grad():
+        both = model(torch.cat(lows), rgb)
+        alone = torch.cat([model(low, c[None]) for low, c in zip(lows, rgb)])
+        as64 = model(lows[0].double(), rgb[:1].double())
+    assert as64.dtype == torch.float64
+    assert torch.allclose(both, alone, rtol=1e-4, atol=1e-2)
+    assert torch.allclose(as64.float(), alone[:1], rtol=1e-4, atol=1e-2)
