@@ -21,6 +21,8 @@ __all__ = [
     "JBU_PARAMS",
     "DICTIONARY_PARAMS",
     "RGF_PARAMS",
+    "SHIPPED",
+    "TAKES_PRETRAINED",
     "run_method",
 ]
 
@@ -49,20 +51,23 @@ RGF_PARAMS = {"paper": dict(sigma_space=3.0, sigma_color=7.0, iterations=3),
               "sensor": dict(sigma_space=3.0, sigma_color=20.0, iterations=4)}
 
 
+# the methods that run shipped parameters (``from_pretrained(name)``): "trained-guided" with the guidance network's
+# per-pixel thresholds, "trained-upsample" the frozen model plus the edge refiner at every factor (issue 14)
+SHIPPED = {"trained": "denoise", "trained-guided": "denoise-guided", "trained-x4": "upsample-x4",
+           "trained-upsample": "upsample"}
+# those of them that load a saved candidate instead when ``pretrained`` is given
+TAKES_PRETRAINED = ("trained", "trained-x4", "trained-upsample")
+_MODEL_METHODS = ("tv", "tv+nl", "full", "full-fast", "paper-model", *SHIPPED)
+
+
 @lru_cache(maxsize=None)
 def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[str] = None):
     from ..model import DepthRestorer
 
-    if name in ("trained", "trained-x4", "trained-upsample") and pretrained is not None:  # a candidate before it ships
+    if pretrained is not None:  # a candidate before it ships (run_method passes it to TAKES_PRETRAINED only)
         return DepthRestorer.load(pretrained).to(device)
-    if name == "trained":
-        return DepthRestorer.from_pretrained("denoise").to(device)
-    if name == "trained-guided":  # with the guidance network's per-pixel thresholds (issue 14)
-        return DepthRestorer.from_pretrained("denoise-guided").to(device)
-    if name == "trained-x4":
-        return DepthRestorer.from_pretrained("upsample-x4").to(device)
-    if name == "trained-upsample":  # the frozen model plus the edge refiner, every factor (issue 14)
-        return DepthRestorer.from_pretrained("upsample").to(device)
+    if name in SHIPPED:
+        return DepthRestorer.from_pretrained(SHIPPED[name]).to(device)
     if name == "full-fast":
         return DepthRestorer.preset("fast", **json.loads(overrides)).to(device)
     if name == "paper-model":  # the paper's model without the library's extensions (ablation "paper")
@@ -107,9 +112,9 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             from ..baselines import dictionary_denoise
 
             return dictionary_denoise(y, rgb, mask, **DICTIONARY_PARAMS)
-        if name in ("tv", "tv+nl", "full", "full-fast", "paper-model", "trained", "trained-guided", "trained-x4",
-                    "trained-upsample"):
+        if name in _MODEL_METHODS:
             return _model(name, device, json.dumps(config or {}, sort_keys=True),
-                          pretrained if name in ("trained", "trained-x4", "trained-upsample") else None)(y, rgb)
+                          pretrained if name in TAKES_PRETRAINED else None)(y, rgb)
+    extra = [m for m in _MODEL_METHODS if m not in DENOISE_METHODS + UPSAMPLE_METHODS]
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
-                     "and 'full-fast', 'paper-model', 'trained', 'trained-guided', 'trained-x4', 'trained-upsample'.")
+                     f"and {extra}.")

@@ -17,17 +17,29 @@ from typing import Optional, Sequence
 
 from .train import TrainConfig
 
-__all__ = ["config_from_args", "cmd_train", "cmd_train_refiner", "add_train_parser", "add_train_refiner_parser", "main"]
+__all__ = ["config_from_args", "cmd_train", "cmd_train_refiner", "add_train_parser", "add_train_refiner_parser",
+           "main"]
 
 
-def _add_arguments(p: argparse.ArgumentParser) -> None:
-    d = TrainConfig()
-    p.add_argument("--out", default=d.out, help="run folder (checkpoint/, best/, last/, history.json)")
+def _add_shared_arguments(p: argparse.ArgumentParser, d, out_help: str) -> None:
+    """The flags ``train`` and ``train-refiner`` have alike; ``d``: the command's settings with their defaults."""
+    p.add_argument("--out", default=d.out, help=out_help)
     p.add_argument("--data", default=None, help="data root holding middlebury2006 (default: $TORCH_DEPTH_SR_DATA)")
     p.add_argument("--steps", type=int, default=d.steps)
     p.add_argument("--batch-size", type=int, default=d.batch_size, help="per process")
     p.add_argument("--crop", type=int, default=d.crop)
     p.add_argument("--lr", type=float, default=d.lr)
+    p.add_argument("--synthetic", type=int, default=d.synthetic, help="number of synthetic training scenes")
+    p.add_argument("--val-scenes", nargs="*", default=list(d.val_scenes), help="2006 scenes held out for validation")
+    p.add_argument("--val-every", type=int, default=d.val_every)
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--threads", type=int, default=d.threads, help="torch threads per process")
+    p.add_argument("--no-progress", action="store_true")
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    d = TrainConfig()
+    _add_shared_arguments(p, d, "run folder (checkpoint/, best/, last/, history.json)")
     p.add_argument("--guidance-lr", type=float, default=d.guidance_lr,
                    help="learning rate of the guidance network's weights (--model '{\"guidance_net\": true}')")
     p.add_argument("--weight-decay", type=float, default=d.weight_decay)
@@ -41,21 +53,15 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="kernel that makes the low-resolution inputs (bicubic: the gdsr protocol's)")
     p.add_argument("--clean-share", type=float, default=d.clean_share,
                    help="probability of a noise-free training item (σ = 0)")
-    p.add_argument("--synthetic", type=int, default=d.synthetic, help="number of synthetic training scenes")
     p.add_argument("--synthetic-only", action="store_true", help="no Middlebury data (e.g. CI)")
-    p.add_argument("--val-scenes", nargs="*", default=list(d.val_scenes), help="2006 scenes held out for validation")
     p.add_argument("--val-size", type=int, default=d.val_size, help="validation crops per track")
-    p.add_argument("--val-every", type=int, default=d.val_every)
     p.add_argument("--save-every", type=int, default=d.save_every)
     p.add_argument("--workers", type=int, default=d.num_workers)
-    p.add_argument("--threads", type=int, default=d.threads, help="torch threads per process")
-    p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--device", default=d.device)
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint if present")
     p.add_argument("--stop-at", type=int, default=None, help="end this run after this step (resume later)")
     p.add_argument("--init", default=None, help="start from a pretrained name or saved folder (default: defaults)")
     p.add_argument("--model", default="{}", help='RestorerConfig overrides as JSON, e.g. \'{"num_layers": 4}\'')
-    p.add_argument("--no-progress", action="store_true")
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -98,8 +104,7 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
     from .refiner import RefinerConfig
 
     d = RefinerConfig()
-    p.add_argument("--out", default=d.out, help="run folder (best/, last/, history.json)")
-    p.add_argument("--data", default=None, help="data root holding middlebury2006 (default: $TORCH_DEPTH_SR_DATA)")
+    _add_shared_arguments(p, d, "run folder (best/, last/, history.json)")
     p.add_argument("--source", choices=["middlebury2006", "gdsr"], default=d.source,
                    help="the 2006 scenes' files: the project's copy, or the guided-SR test set's versions of them")
     p.add_argument("--base", default=json.dumps(d.base),
@@ -107,18 +112,8 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--factors", type=int, nargs="+", default=list(d.factors))
     p.add_argument("--noises", type=float, nargs="+", default=list(d.noises),
                    help="noise σ on a 0-255 scale of each image's range (the gdsr protocol's)")
-    p.add_argument("--synthetic", type=int, default=d.synthetic, help="number of synthetic training scenes")
-    p.add_argument("--val-scenes", nargs="*", default=list(d.val_scenes), help="2006 scenes held out for validation")
     p.add_argument("--channels", type=int, default=d.channels)
     p.add_argument("--layers", type=int, default=d.layers)
-    p.add_argument("--steps", type=int, default=d.steps)
-    p.add_argument("--batch-size", type=int, default=d.batch_size)
-    p.add_argument("--crop", type=int, default=d.crop)
-    p.add_argument("--lr", type=float, default=d.lr)
-    p.add_argument("--val-every", type=int, default=d.val_every)
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--threads", type=int, default=d.threads)
-    p.add_argument("--no-progress", action="store_true")
 
 
 def cmd_train_refiner(args: argparse.Namespace) -> int:
@@ -128,8 +123,8 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
 
     if args.crop % max(args.factors):
         raise UsageError(f"--crop {args.crop} must be a multiple of every factor; got --factors {args.factors}")
-    cfg = RefinerConfig(out=args.out, data=args.data, source=args.source, base=json.loads(args.base), factors=tuple(args.factors),
-                        noises=tuple(args.noises), synthetic=args.synthetic, val_scenes=tuple(args.val_scenes),
+    cfg = RefinerConfig(out=args.out, data=args.data, source=args.source, base=json.loads(args.base),
+                        factors=tuple(args.factors), noises=tuple(args.noises), synthetic=args.synthetic, val_scenes=tuple(args.val_scenes),
                         channels=args.channels, layers=args.layers, steps=args.steps, batch_size=args.batch_size,
                         crop=args.crop, lr=args.lr, val_every=args.val_every, seed=args.seed, threads=args.threads,
                         progress=not args.no_progress)
