@@ -15,7 +15,7 @@ from torch_depth_sr.config import (BlockMatchingConfig, InitConfig, LayerConfig,
 from torch_depth_sr.layers import RestorationContext
 from torch_depth_sr.operators import AreaDownsample, BicubicDownsample, Identity
 
-GROUPS = ("layer", "block_matching", "value_prior", "singular", "solver", "initial", "upsampling", "edge_snap")
+GROUPS = ("layer", "block_matching", "value_prior", "singular", "solver", "initial", "upsampling", "edge_snap", "refiner")
 TOP_LEVEL = {"num_layers", "fidelity_band", "extra"}
 PRETRAINED = sorted((Path(torch_depth_sr.__file__).parent / "pretrained").glob("*/config.json"))
 

@@ -1,5 +1,6 @@
-"""The edge refiner of guided upsampling (issue 14): its clamp, its unit-freedom, where the model runs it, its
-training command, the bicubic training degradation, and (with the data) the shipped model's effect."""
+"""The edge refiner (issue 14): its clamp, its unit-freedom, where the model runs it (upsampling or denoising, the
+task it was trained for), its training command, the bicubic training degradation, and (with the data) the shipped
+models' effect."""
 import json
 
 import pytest
@@ -14,9 +15,9 @@ from torch_depth_sr.training.datasets import CropDataset
 from torch_depth_sr.transforms import Downsample
 
 
-def _random_refiner(seed=0, channels=8, layers=2):
+def _random_refiner(seed=0, channels=8, layers=2, reads_trust=False):
     torch.manual_seed(seed)
-    ref = EdgeRefiner(channels, layers)
+    ref = EdgeRefiner(channels, layers, reads_trust)
     for p in ref.parameters():  # a network that says something (the shipped last layer starts at 0)
         torch.nn.init.normal_(p, std=0.3)
     return ref
@@ -77,6 +78,46 @@ def test_model_runs_the_refiner_only_when_upsampling(tmp_path):
     again = DepthRestorer.load(tmp_path / "m").eval()
     with torch.no_grad():
         assert torch.equal(again(low, s["rgb"][None]), b)
+
+
+def _with_random_refiner(task: str) -> tuple[DepthRestorer, DepthRestorer]:
+    plain = DepthRestorer(degradation="bicubic", num_layers=2).eval()
+    refined = DepthRestorer(degradation="bicubic", num_layers=2, refine_net=True, refine_channels=8,
+                            refine_layers=1, refine_task=task).eval()
+    refiner = _random_refiner(4, 8, 1, reads_trust=task == "denoise")
+    refined.load_state_dict({**plain.state_dict(), **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}})
+    return plain, refined
+
+
+def test_a_denoising_refiner_runs_only_when_denoising_and_keeps_the_band(tmp_path):
+    from torch_depth_sr.fidelity import noise_band
+
+    s = make_scene(64, 80, seed=3)
+    plain, refined = _with_random_refiner("denoise")
+    noisy = (s["gt"] + 3 * torch.randn(s["gt"].shape, generator=torch.Generator().manual_seed(0))).clamp_min(1)
+    noisy[:, 30:36, 30:40] = 0  # a hole the model fills and the refiner may correct
+    with torch.no_grad():
+        low = Downsample(4, "bicubic")({"depth": s["gt"][None]})["depth"]
+        assert torch.equal(plain(low, s["rgb"][None]), refined(low, s["rgb"][None]))  # upsampling: not run
+        a = plain.restore_with_details(noisy[None], s["rgb"][None])
+        b = refined.restore_with_details(noisy[None], s["rgb"][None])
+    assert not torch.allclose(a.depth, b.depth)
+    # the fidelity band still holds every trusted measurement, whatever the network says
+    sigma, scale = torch.tensor(b.info["noise_sigma"]), torch.tensor(b.info["scale"])
+    band = float(noise_band(torch.zeros(1), sigma / scale, refined.fidelity_band)) * float(scale)
+    trusted = b.trusted > 0
+    assert float((b.depth - noisy[None])[trusted].abs().max()) <= band * (1 + 1e-4)
+    # and it keeps to the range of the trusted values (and the model's fill) around each pixel: nothing new
+    assert float(b.depth.max()) <= float(torch.maximum(a.depth, noisy[None]).max()) + 1e-3
+    refined.save(tmp_path / "m")
+    assert DepthRestorer.load(tmp_path / "m").config.refine_task == "denoise"
+
+
+def test_refine_task_is_checked():
+    from torch_depth_sr import ParameterError
+
+    with pytest.raises(ParameterError, match="refine_task"):
+        DepthRestorer(refine_net=True, refine_task="deblur")
 
 
 def test_bicubic_downsample_is_the_protocol_resize_and_ignores_holes():

@@ -25,6 +25,7 @@ __all__ = [
     "LayerConfig",
     "LayerMultipliers",
     "PRESETS",
+    "RefinerSettings",
     "RestorerConfig",
     "SIDED_FILL_DEFAULTS",
     "SidedFillConfig",
@@ -80,12 +81,14 @@ class RestorerConfig:
     guidance_net: bool = False
     guidance_channels: int = 16  # feature channels of the guidance network
     guidance_range: float = 4.0  # R: every multiplier of the guidance network lies in [1/R, R] (R = 1: all 1)
-    # upsampling only: a learned residual CNN corrects the output at depth edges, clamped to the range of the
-    # low-resolution values around each pixel (torch_depth_sr.refiner; issue 14); zero-initialised, trained on the
-    # frozen model's outputs (torch_depth_sr.training.refiner); off = the model alone
+    # a learned residual CNN corrects the output at depth edges, clamped to the range of the measured values around
+    # each pixel (torch_depth_sr.refiner; issue 14); zero-initialised, trained on the frozen model's outputs
+    # (torch_depth_sr.training.refiner); off = the model alone. It runs for one task, the one it was trained for:
+    # "upsample" (K ≠ I) or "denoise" (K = I, after the edge steps and before the fidelity band)
     refine_net: bool = False
     refine_channels: int = 32
     refine_layers: int = 6
+    refine_task: str = "upsample"
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 11
@@ -290,6 +293,11 @@ class RestorerConfig:
         """Guided upsampling: the degradation, x⁰ on the fine grid and the weights' multipliers (``upsample_*``)."""
         return UpsamplingConfig.from_config(self)
 
+    @property
+    def refiner(self) -> "RefinerSettings":
+        """The learned edge refiner after the model (``refine_*``)."""
+        return RefinerSettings.from_config(self)
+
     def to_json(self) -> str:
         return json.dumps(dataclasses.asdict(self), indent=2, sort_keys=True)
 
@@ -444,6 +452,23 @@ class EdgeSnapConfig(_Group):
 
 
 @dataclass(frozen=True)
+class RefinerSettings(_Group):
+    """The learned edge refiner after the model (:class:`~torch_depth_sr.refiner.EdgeRefiner`): on or off (``net``),
+    ``channels`` wide with ``layers`` hidden convolutions, for one ``task``: ``"upsample"`` (runs when K ≠ I) or
+    ``"denoise"`` (runs when K = I); flat fields ``refine_*``."""
+
+    net: bool
+    channels: int
+    layers: int
+    task: str
+    _FLAT: ClassVar[dict] = _prefixed("refine_", "net", "channels", "layers", "task")
+
+    def runs_for(self, upsampling: bool) -> bool:
+        """Whether the refiner corrects an output of this task (upsampling or not)."""
+        return self.net and (self.task == "upsample") == upsampling
+
+
+@dataclass(frozen=True)
 class SolverConfig(_Group):
     """The x-update's preconditioned CG (:func:`~torch_depth_sr.solvers.implicit.cg_solve`); flat fields
     ``cg_fixed_iters``, ``cg_tol``, ``cg_max_iter``, ``precondition``, ``implicit_backward``."""
@@ -550,9 +575,7 @@ class UpsamplingConfig(_Group):
     :func:`~torch_depth_sr.operators.degradation_operator`), x⁰ on the fine grid (``init``: ``"jbu"`` held within
     ``init_band`` noise σ plus ``init_edge_band`` times the depth-edge evidence of bicubic interpolation, or
     ``"bicubic"``; :func:`~torch_depth_sr.upsampling.upsample_initial`) and the layer weights' policy
-    (:meth:`layer_weights`), and the learned edge refiner after the model (``refine``, ``refine_channels`` wide,
-    ``refine_layers`` hidden convolutions; :mod:`~torch_depth_sr.refiner`). Flat fields ``degradation``,
-    ``upsample_*`` and ``refine_*``."""
+    (:meth:`layer_weights`). Flat fields ``degradation`` and ``upsample_*``."""
 
     degradation: str
     init: str
@@ -565,17 +588,13 @@ class UpsamplingConfig(_Group):
     jbu: JBUConfig
     tv_per_factor: bool
     multipliers: LayerMultipliers
-    refine: bool
-    refine_channels: int
-    refine_layers: int
     _FLAT: ClassVar[dict] = {"degradation": "degradation", "init": "upsample_init", "init_band": "upsample_init_band",
                              "init_edge_band": "upsample_init_edge_band",
                              "init_consistency": "upsample_init_consistency", "jbu": "upsample_jbu",
                              "output_band": "upsample_output_band", "output_edge": "upsample_output_edge",
                              "output_edge_threshold": "upsample_output_edge_threshold",
                              "tv_per_factor": "upsample_tv_per_factor",
-                             "multipliers": "upsample_scale", "refine": "refine_net",
-                             "refine_channels": "refine_channels", "refine_layers": "refine_layers"}
+                             "multipliers": "upsample_scale"}
 
     @classmethod
     def from_config(cls, c: RestorerConfig) -> "UpsamplingConfig":
@@ -585,8 +604,7 @@ class UpsamplingConfig(_Group):
                    output_edge_threshold=c.upsample_output_edge_threshold,
                    jbu=JBUConfig(**c.upsample_jbu),
                    tv_per_factor=c.upsample_tv_per_factor,
-                   multipliers=LayerMultipliers(**c.upsample_scale), refine=c.refine_net,
-                   refine_channels=c.refine_channels, refine_layers=c.refine_layers)
+                   multipliers=LayerMultipliers(**c.upsample_scale))
 
     def to_flat(self) -> dict:
         d = super().to_flat()
@@ -767,6 +785,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "prior_on_singular": _bool, "init_singular": _bool, "guidance_net": _bool, "guidance_channels": _int(1), "init_keep_observed": _bool,
     "guidance_range": _real(1.0, lo_open=False),
     "refine_net": _bool, "refine_channels": _int(1), "refine_layers": _int(0),
+    "refine_task": _choice("upsample", "denoise"),
     "init_kernel_size": _int(1),
     "init_sigma_space": _positive, "init_sigma_color": _positive,
     "init_dt_sigma_space": _positive, "init_dt_sigma_color": _positive, "init_dt_iterations": _int(1),

@@ -122,11 +122,13 @@ class DepthRestorer(nn.Module):
         if config.guidance_net:
             self.guidance = GuidanceNet(config.num_layers, config.guidance_channels,
                                         config.guidance_range).requires_grad_(trainable)
-        # upsampling only: the learned, clamped correction at depth edges (issue 14); None = no state-dict keys
+        # the learned, clamped correction at depth edges, for the task it was trained for (issue 14); None = no
+        # state-dict keys
         self.refiner: Optional[EdgeRefiner] = None
-        up = config.upsampling
-        if up.refine:
-            self.refiner = EdgeRefiner(up.refine_channels, up.refine_layers).requires_grad_(trainable)
+        self.refine_settings = config.refiner
+        if self.refine_settings.net:
+            self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers,
+                                       reads_trust=config.refine_task == "denoise").requires_grad_(trainable)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod
@@ -257,6 +259,10 @@ class DepthRestorer(nn.Module):
                 x = snap_to_sides(x, guide, **snap.arguments(), active=~ctx.clean)
                 if snap.refit_radius > 0:
                     x = refit_to_measurements(x, yn, observed, guide, **snap.refit_arguments(), active=~ctx.clean)
+        if K.is_identity and self.refiner is not None and guide is not None and self.refine_settings.runs_for(False):
+            with stage(ctx.log.timings, "refine", x.device):  # bounded by the trusted values around each pixel
+                trusted = state.q * observed
+                x = self.refiner(x, torch.where(trusted > 0, yn, x), guide, sigma.to(x) / scale, trusted)
         if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
             band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)
@@ -264,7 +270,7 @@ class DepthRestorer(nn.Module):
             white = sigma if noise_sigma is not None else white_noise_sigma(y, observed)
             x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
                                 white.to(sigma) / scale)
-            if self.refiner is not None and guide is not None:
+            if self.refiner is not None and guide is not None and self.refine_settings.runs_for(True):
                 with stage(ctx.log.timings, "refine", x.device):  # holes of the input: what the model made of them
                     x = self.refiner(x, torch.where(observed > 0, yn, K(x)), guide, white.to(x) / scale)
         if timed:

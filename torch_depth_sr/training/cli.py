@@ -105,13 +105,23 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
 
     d = RefinerConfig()
     _add_shared_arguments(p, d, "run folder (best/, last/, history.json)")
+    p.add_argument("--task", choices=["upsample", "denoise"], default=d.task,
+                   help="upsample: gdsr degradations, the refiner runs when K != I; denoise: the paper/sensor "
+                        "degradations, it runs when K = I")
+    p.add_argument("--init", default=None,
+                   help="the frozen model: a pretrained name (e.g. denoise-guided) or a saved folder (default: the "
+                        "defaults)")
     p.add_argument("--source", choices=["middlebury2006", "gdsr"], default=d.source,
                    help="the 2006 scenes' files: the project's copy, or the guided-SR test set's versions of them")
     p.add_argument("--base", default=json.dumps(d.base),
                    help="RestorerConfig overrides of the frozen model, as JSON (default: %(default)s)")
-    p.add_argument("--factors", type=int, nargs="+", default=list(d.factors))
+    p.add_argument("--factors", type=int, nargs="+", default=list(d.factors), help="task upsample")
     p.add_argument("--noises", type=float, nargs="+", default=list(d.noises),
-                   help="noise σ on a 0-255 scale of each image's range (the gdsr protocol's)")
+                   help="noise σ: upsample, on a 0-255 scale of each image's range (the gdsr protocol's); denoise, "
+                        "in grey levels (the paper/sensor tracks')")
+    p.add_argument("--tracks", nargs="+", choices=["paper", "sensor"], default=list(d.tracks), help="task denoise")
+    p.add_argument("--seeds", type=int, default=d.seeds, help="task denoise: draws per scene, track and σ")
+    p.add_argument("--loss", choices=["l1", "l2"], default=d.loss)
     p.add_argument("--channels", type=int, default=d.channels)
     p.add_argument("--layers", type=int, default=d.layers)
 
@@ -121,10 +131,12 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
     from ..errors import UsageError
     from .refiner import RefinerConfig, train_refiner
 
-    if args.crop % max(args.factors):
+    if args.task == "upsample" and args.crop % max(args.factors):
         raise UsageError(f"--crop {args.crop} must be a multiple of every factor; got --factors {args.factors}")
-    cfg = RefinerConfig(out=args.out, data=args.data, source=args.source, base=json.loads(args.base),
-                        factors=tuple(args.factors), noises=tuple(args.noises), synthetic=args.synthetic, val_scenes=tuple(args.val_scenes),
+    cfg = RefinerConfig(out=args.out, data=args.data, task=args.task, init=args.init, source=args.source,
+                        base=json.loads(args.base), factors=tuple(args.factors), noises=tuple(args.noises),
+                        tracks=tuple(args.tracks), seeds=args.seeds, loss=args.loss, synthetic=args.synthetic,
+                        val_scenes=tuple(args.val_scenes),
                         channels=args.channels, layers=args.layers, steps=args.steps, batch_size=args.batch_size,
                         crop=args.crop, lr=args.lr, val_every=args.val_every, seed=args.seed, threads=args.threads,
                         progress=not args.no_progress)
@@ -135,8 +147,8 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
 
 def add_train_refiner_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Add the ``train-refiner`` sub-command."""
-    p = subparsers.add_parser("train-refiner", help="learn the edge refiner of guided upsampling on the frozen "
-                                                    "model's outputs")
+    p = subparsers.add_parser("train-refiner", help="learn the edge refiner (guided upsampling or "
+                                                    "denoising) on the frozen model's outputs")
     _add_refiner_arguments(p)
     p.set_defaults(func=cmd_train_refiner)
     return p

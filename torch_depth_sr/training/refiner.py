@@ -1,19 +1,28 @@
-"""Training the edge refiner (:mod:`torch_depth_sr.refiner`) on the frozen model's upsampled outputs.
+"""Training the edge refiner (:mod:`torch_depth_sr.refiner`) on the frozen model's outputs.
 
 The unrolled model is too slow on this CPU to be trained end to end with a CNN after it, and it does not need to
 be: its parameters stay as they are, so its outputs are computed once per training image (full images, every
-factor and noise level) and the refiner learns on random crops of them. Data, as for every trained parameter of the
+degradation) and the refiner learns on random crops of them. What the refiner learns from is exactly what the model
+hands it at inference: the model runs with a stand-in refiner that records its arguments (:func:`_recorded`), so
+the bounds, the filled holes and the noise level are the model's own. Data, as for every trained parameter of the
 project: the Middlebury 2006 scenes (two held out for validation) and procedural synthetic scenes.
 
-Degradation (the ``gdsr`` protocol, ``shared/docs/benchmark.md``): crop to a multiple of ``s``, antialiased
-bicubic downsampling (mask-aware, :class:`~torch_depth_sr.transforms.Downsample`), Gaussian noise of σ = ``noise``
-on a 0–255 scale of the image's ground-truth range on the measured low-resolution pixels.
+Two tasks (``task``):
+
+* ``"upsample"`` (the ``gdsr`` protocol, ``shared/docs/benchmark.md``): crop to a multiple of ``s``, antialiased
+  bicubic downsampling (mask-aware, :class:`~torch_depth_sr.transforms.Downsample`), Gaussian noise of σ =
+  ``noise`` on a 0–255 scale of the image's ground-truth range on the measured low-resolution pixels; every
+  factor × noise.
+* ``"denoise"``: the ``paper`` and ``sensor`` degradations (:mod:`torch_depth_sr.degradations`) at every σ of
+  ``noises`` (grey levels), ``seeds`` draws each; the refiner then runs when K = I.
 
 Output: ``<out>/best`` and ``<out>/last``, :meth:`DepthRestorer.save` folders of the base model with
-``refine_net=True`` and the refiner's weights, and ``<out>/history.json``.
+``refine_net=True`` (``refine_task`` the task) and the refiner's weights, and ``<out>/history.json``.
 """
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import json
 import math
 import time
@@ -23,10 +32,9 @@ from typing import Optional
 
 import numpy as np
 import torch
+from torch import nn
 
 from ..model import DepthRestorer
-from ..noise import white_noise_sigma
-from ..operators import degradation_operator
 from ..refiner import EdgeRefiner
 from ..transforms import Downsample
 from .datasets import middlebury_records
@@ -38,13 +46,20 @@ __all__ = ["RefinerConfig", "degrade_for_refiner", "train_refiner"]
 class RefinerConfig:
     """Settings of :func:`train_refiner` (the CLI flags mirror these names)."""
     out: str = "runs/refiner"
+    task: str = "upsample"  # "upsample" (gdsr degradation, K ≠ I) or "denoise" (paper/sensor degradations, K = I)
     # the Middlebury 2006 scenes as "middlebury2006" (the project's copy: official third-size maps with their holes)
     # or as "gdsr" (the files of the same eleven scenes in the guided-SR test set, filled and in that set's own
     # rendering of the ground truth, which differs from the official maps at depth edges)
     source: str = "middlebury2006"
-    base: dict = field(default_factory=lambda: {"degradation": "bicubic"})  # RestorerConfig of the frozen model
-    factors: tuple = (4, 8, 16)
-    noises: tuple = (0.0, 5.0, 10.0)  # σ on a 0–255 scale of each image's ground-truth range
+    # RestorerConfig overrides of the frozen model; task "upsample" without ``init`` defaults to K = bicubic
+    base: dict = field(default_factory=dict)
+    init: Optional[str] = None  # the frozen model from a pretrained name or a saved folder (then ``base`` overrides it)
+    factors: tuple = (4, 8, 16)  # task "upsample"
+    # task "upsample": σ on a 0–255 scale of each image's ground-truth range; "denoise": σ in grey levels
+    noises: tuple = (0.0, 5.0, 10.0)
+    tracks: tuple = ("paper", "sensor")  # task "denoise": the degradations
+    seeds: int = 1  # task "denoise": draws of each degradation per scene and σ
+    loss: str = "l1"  # "l1" or "l2", on known pixels in units of each image's range/10
     synthetic: int = 16  # procedural scenes (seeds 0..n−1), 240×320
     val_scenes: tuple = ("Cloth4", "Wood2")
     channels: int = 32
@@ -104,25 +119,66 @@ def _scenes(cfg: RefinerConfig) -> tuple[list[dict], list[dict]]:
     return train, valid
 
 
+class _Recorder(nn.Module):
+    """Stands in for the refiner inside the model: keeps what the model hands it and returns ``x`` unchanged."""
+
+    def forward(self, x, lowres, rgb, noise, trusted=None):
+        self.args = (x, lowres, rgb, noise, trusted)
+        return x
+
+
+@contextlib.contextmanager
+def _recorded(base: DepthRestorer, task: str):
+    """``base`` with a :class:`_Recorder` as its refiner for ``task``; the model is put back afterwards."""
+    kept = base.refiner, base.refine_settings
+    base.refiner = _Recorder()
+    base.refine_settings = dataclasses.replace(kept[1], net=True, task=task)
+    try:
+        yield base.refiner
+    finally:
+        base.refiner, base.refine_settings = kept
+
+
+def _degraded(s: dict, cfg: RefinerConfig, g: torch.Generator, job: tuple) -> tuple[torch.Tensor, ...]:
+    """``(input, rgb, gt, mask)`` (1,C,·,·) of one job: ``(factor, noise)`` (upsample) or ``(track, σ, seed)``."""
+    if cfg.task == "upsample":
+        f, n = job
+        gt, mask, low = degrade_for_refiner(s["gt"][None], s["mask"][None], f, n, g)
+        return low, s["rgb"][None, :, : gt.shape[-2], : gt.shape[-1]], gt, mask
+    from ..degradations import make_degradation
+
+    track, sigma, seed = job
+    d = make_degradation(track, sigma=sigma, seed=seed)(s)
+    return d["depth"][None], s["rgb"][None], s["gt"][None], s["mask"][None]
+
+
+def _jobs(cfg: RefinerConfig) -> list[tuple]:
+    if cfg.task == "upsample":
+        return [(f, n) for f in cfg.factors for n in cfg.noises]
+    return [(t, n, cfg.seed * 1000 + k) for t in cfg.tracks for n in cfg.noises for k in range(cfg.seeds)]
+
+
 @torch.no_grad()
 def _samples(base: DepthRestorer, refiner: EdgeRefiner, scenes: list[dict], cfg: RefinerConfig,
              tag: str) -> list[dict]:
-    """The frozen model's output on every scene × factor × noise and the refiner's whole-image inputs."""
+    """The frozen model's output on every scene × degradation and the refiner's whole-image inputs, in the
+    model's normalised units (``gt`` too; ``scale`` converts back)."""
     from tqdm import tqdm
 
     out = []
-    jobs = [(s, f, n) for s in scenes for f in cfg.factors for n in cfg.noises]
-    for i, (s, f, n) in enumerate(tqdm(jobs, desc=f"model outputs ({tag})", disable=not cfg.progress)):
+    jobs = [(s, j) for s in scenes for j in _jobs(cfg)]
+    for i, (s, job) in enumerate(tqdm(jobs, desc=f"model outputs ({tag})", disable=not cfg.progress)):
         g = torch.Generator().manual_seed(cfg.seed * 100_003 + i)
-        gt, mask, low = degrade_for_refiner(s["gt"][None], s["mask"][None], f, n, g)
-        rgb = s["rgb"][None, :, : gt.shape[-2], : gt.shape[-1]]
-        lr = torch.where(low > 0, low, torch.full_like(low, float("nan")))
-        x = base(lr, rgb).float()
-        filled = torch.where(low > 0, low, degradation_operator(base.degradation, f)(x))
-        level = white_noise_sigma(low, (low > 0).to(low))  # what the model hands its refiner
-        phi, lo, hi, unit = refiner.prepare(x, filled, rgb, level)
-        out.append({"x": x, "phi": phi, "lo": lo, "hi": hi, "unit": unit, "gt": gt, "mask": mask,
-                    "factor": f, "noise": n, "name": f"{s['name']}/x{f}/n{n:g}"})
+        low, rgb, gt, mask = _degraded(s, cfg, g, job)
+        with _recorded(base, cfg.task) as recorder:
+            info = base.restore_with_details(torch.where(low > 0, low, torch.full_like(low, float("nan"))),
+                                             rgb).info
+        x, filled, guide, level, trusted = (None if a is None else a.float() for a in recorder.args)
+        offset, scale = info["offset"][0], info["scale"][0]
+        phi, lo, hi, unit = refiner.prepare(x, filled, guide, level, trusted)
+        out.append({"x": x, "phi": phi, "lo": lo, "hi": hi, "unit": unit, "gt": (gt - offset) / scale,
+                    "mask": mask, "scale": scale, "factor": x.shape[-1] // low.shape[-1],
+                    "name": f"{s['name']}/" + "/".join(f"{v:g}" if isinstance(v, float) else str(v) for v in job)})
     return out
 
 
@@ -147,29 +203,49 @@ def _crop_batch(samples: list[dict], cfg: RefinerConfig, rng: np.random.Generato
     return {k: torch.cat(v) for k, v in parts.items()}
 
 
-def _loss(refiner: EdgeRefiner, batch: dict) -> torch.Tensor:
-    """L1 error on known pixels in units of each image's ``unit`` (unit-free), mean over the batch's pixels."""
+def _loss(refiner: EdgeRefiner, batch: dict, loss: str = "l1") -> torch.Tensor:
+    """L1 (or squared) error on known pixels in units of each image's ``unit`` (unit-free), mean over the batch's
+    pixels."""
     pred = refiner.correct(batch["x"], batch["phi"], batch["lo"], batch["hi"], batch["unit"])
     valid = (batch["mask"] > 0).to(pred.dtype)
-    return ((pred - batch["gt"]).abs() / batch["unit"] * valid).sum() / valid.sum().clamp_min(1)
+    err = (pred - batch["gt"]) / batch["unit"]
+    err = err.abs() if loss == "l1" else err.square()
+    return (err * valid).sum() / valid.sum().clamp_min(1)
 
 
 @torch.no_grad()
 def _validate(refiner: EdgeRefiner, samples: list[dict]) -> dict:
-    """Mean RMSE over the validation samples (known pixels) of the refined and the unrefined outputs."""
+    """Mean RMSE (in the input's units) over the validation samples (known pixels) of the refined and the unrefined
+    outputs."""
     refined, plain = [], []
     for s in samples:
         valid = s["mask"] > 0
         pred = refiner.correct(s["x"], s["phi"], s["lo"], s["hi"], s["unit"])
-        refined.append(float((pred - s["gt"])[valid].square().mean().sqrt()))
-        plain.append(float((s["x"] - s["gt"])[valid].square().mean().sqrt()))
+        refined.append(float((pred - s["gt"])[valid].square().mean().sqrt()) * s["scale"])
+        plain.append(float((s["x"] - s["gt"])[valid].square().mean().sqrt()) * s["scale"])
     return {"rmse": float(np.mean(refined)), "rmse_model": float(np.mean(plain))}
+
+
+def _base_model(cfg: RefinerConfig) -> DepthRestorer:
+    """The frozen model: ``cfg.init`` (a pretrained name or a saved folder) with ``cfg.base`` overrides, or the
+    defaults with them."""
+    if cfg.task not in ("upsample", "denoise"):
+        raise ValueError(f"task={cfg.task!r}; allowed are 'upsample' and 'denoise'")
+    if cfg.loss not in ("l1", "l2"):
+        raise ValueError(f"loss={cfg.loss!r}; allowed are 'l1' and 'l2'")
+    if cfg.init is None:
+        k = {"degradation": "bicubic"} if cfg.task == "upsample" else {}
+        return DepthRestorer(**{**k, **cfg.base}).eval()
+    if Path(cfg.init).is_dir():
+        return DepthRestorer.load(cfg.init, **cfg.base).eval()
+    return DepthRestorer.from_pretrained(cfg.init, **cfg.base).eval()
 
 
 def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
     model = DepthRestorer(base.config.replace(refine_net=True, refine_channels=cfg.channels,
-                                              refine_layers=cfg.layers))
-    state = {**base.state_dict(), **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}}
+                                              refine_layers=cfg.layers, refine_task=cfg.task))
+    state = {**{k: v for k, v in base.state_dict().items() if not k.startswith("refiner.")},
+             **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}}
     model.load_state_dict(state)
     model.save(folder)
 
@@ -181,10 +257,10 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "refiner_config.json").write_text(json.dumps(asdict(cfg), indent=2))
-    base = DepthRestorer(**cfg.base).eval()
+    base = _base_model(cfg)
     train_scenes, val_scenes = _scenes(cfg)
     t0 = time.perf_counter()
-    refiner = EdgeRefiner(cfg.channels, cfg.layers)
+    refiner = EdgeRefiner(cfg.channels, cfg.layers, reads_trust=cfg.task == "denoise")  # as the model builds it
     train_samples = _samples(base, refiner, train_scenes, cfg, "training")
     val_samples = _samples(base, refiner, val_scenes, cfg, "validation")
     prepare_seconds = time.perf_counter() - t0
@@ -200,7 +276,7 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     for step in bar:
         for g in opt.param_groups:  # cosine from lr to lr/10
             g["lr"] = cfg.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * (step - 1) / cfg.steps)))
-        loss = _loss(refiner, _crop_batch(train_samples, cfg, rng))
+        loss = _loss(refiner, _crop_batch(train_samples, cfg, rng), cfg.loss)
         opt.zero_grad()
         loss.backward()
         opt.step()
