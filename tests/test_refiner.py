@@ -83,7 +83,7 @@ def test_model_runs_the_refiner_only_when_upsampling(tmp_path):
 def _with_random_refiner(task: str) -> tuple[DepthRestorer, DepthRestorer]:
     plain = DepthRestorer(degradation="bicubic", num_layers=2).eval()
     refined = DepthRestorer(degradation="bicubic", num_layers=2, refine_net=True, refine_channels=8,
-                            refine_layers=1, refine_task=task).eval()
+                            refine_layers=1, refine_task=task, refine_reads_trust=task == "denoise").eval()
     refiner = _random_refiner(4, 8, 1, reads_trust=task == "denoise")
     refined.load_state_dict({**plain.state_dict(), **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}})
     return plain, refined

@@ -128,7 +128,7 @@ class DepthRestorer(nn.Module):
         self.refine_settings = config.refiner
         if self.refine_settings.net:
             self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers,
-                                       reads_trust=config.refine_task == "denoise").requires_grad_(trainable)
+                                       config.refine_reads_trust).requires_grad_(trainable)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod

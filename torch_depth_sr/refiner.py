@@ -52,9 +52,9 @@ class EdgeRefiner(nn.Module):
         channels: width of the hidden layers.
         layers: number of hidden 3×3 convolutions (after the first).
         reads_trust: the network also reads which values of ``lowres`` are trusted measurements (1) and which the
-            model filled (0). Denoising needs it: there ``lowres`` holds the model's own value in holes and at the
-            pixels the singular test distrusts, and without the mask a filled pixel looks like a measurement the
-            model agrees with (on the ``sensor`` validation scenes it took the refiner's gain from −1.8 % to …).
+            model filled (0); only denoising hands it one. There ``lowres`` holds the model's own value in holes
+            and at the pixels the singular test distrusts, so without the mask a filled pixel looks like a
+            measurement the model agrees with.
 
     Examples:
         >>> ref = EdgeRefiner(channels=8, layers=1)

@@ -34,6 +34,9 @@ def _add_shared_arguments(p: argparse.ArgumentParser, d, out_help: str) -> None:
     p.add_argument("--val-every", type=int, default=d.val_every)
     p.add_argument("--seed", type=int, default=d.seed)
     p.add_argument("--threads", type=int, default=d.threads, help="torch threads per process")
+    p.add_argument("--loss", choices=["l2", "l1"], default=d.loss)
+    p.add_argument("--downsample", choices=["area", "bicubic"], default=d.downsample,
+                   help="kernel that makes the low-resolution inputs of upsampling (bicubic: the gdsr protocol's)")
     p.add_argument("--no-progress", action="store_true")
 
 
@@ -43,14 +46,11 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--guidance-lr", type=float, default=d.guidance_lr,
                    help="learning rate of the guidance network's weights (--model '{\"guidance_net\": true}')")
     p.add_argument("--weight-decay", type=float, default=d.weight_decay)
-    p.add_argument("--loss", choices=["l2", "l1"], default=d.loss)
     p.add_argument("--degradation", choices=["paper", "sensor", "mixed"], default=d.degradation)
     p.add_argument("--sigma", type=float, nargs=2, default=list(d.sigma), metavar=("MIN", "MAX"),
                    help="training noise std range (grey levels)")
     p.add_argument("--val-sigma", type=float, default=d.val_sigma)
     p.add_argument("--scale-factor", type=int, default=d.scale_factor, help=">1: train guided upsampling")
-    p.add_argument("--downsample", choices=["area", "bicubic"], default=d.downsample,
-                   help="kernel that makes the low-resolution inputs (bicubic: the gdsr protocol's)")
     p.add_argument("--clean-share", type=float, default=d.clean_share,
                    help="probability of a noise-free training item (σ = 0)")
     p.add_argument("--synthetic-only", action="store_true", help="no Middlebury data (e.g. CI)")
@@ -121,7 +121,9 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
                         "in grey levels (the paper/sensor tracks')")
     p.add_argument("--tracks", nargs="+", choices=["paper", "sensor"], default=list(d.tracks), help="task denoise")
     p.add_argument("--seeds", type=int, default=d.seeds, help="task denoise: draws per scene, track and σ")
-    p.add_argument("--loss", choices=["l1", "l2"], default=d.loss)
+    p.add_argument("--reads-trust", action="store_true",
+                   help="task denoise: the refiner also reads which values are trusted measurements")
+
     p.add_argument("--channels", type=int, default=d.channels)
     p.add_argument("--layers", type=int, default=d.layers)
 
@@ -135,7 +137,7 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
         raise UsageError(f"--crop {args.crop} must be a multiple of every factor; got --factors {args.factors}")
     cfg = RefinerConfig(out=args.out, data=args.data, task=args.task, init=args.init, source=args.source,
                         base=json.loads(args.base), factors=tuple(args.factors), noises=tuple(args.noises),
-                        tracks=tuple(args.tracks), seeds=args.seeds, loss=args.loss, synthetic=args.synthetic,
+                        downsample=args.downsample, tracks=tuple(args.tracks), reads_trust=args.reads_trust, seeds=args.seeds, loss=args.loss, synthetic=args.synthetic,
                         val_scenes=tuple(args.val_scenes),
                         channels=args.channels, layers=args.layers, steps=args.steps, batch_size=args.batch_size,
                         crop=args.crop, lr=args.lr, val_every=args.val_every, seed=args.seed, threads=args.threads,

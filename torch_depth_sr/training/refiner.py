@@ -55,10 +55,12 @@ class RefinerConfig:
     base: dict = field(default_factory=dict)
     init: Optional[str] = None  # the frozen model from a pretrained name or a saved folder (then ``base`` overrides it)
     factors: tuple = (4, 8, 16)  # task "upsample"
+    downsample: str = "bicubic"  # task "upsample": the kernel of the training inputs ("bicubic" or "area")
     # task "upsample": σ on a 0–255 scale of each image's ground-truth range; "denoise": σ in grey levels
     noises: tuple = (0.0, 5.0, 10.0)
     tracks: tuple = ("paper", "sensor")  # task "denoise": the degradations
     seeds: int = 1  # task "denoise": draws of each degradation per scene and σ
+    reads_trust: bool = False  # the refiner reads the trust mask (task "denoise"; there the model hands it one)
     loss: str = "l1"  # "l1" or "l2", on known pixels in units of each image's range/10
     synthetic: int = 16  # procedural scenes (seeds 0..n−1), 240×320
     val_scenes: tuple = ("Cloth4", "Wood2")
@@ -76,11 +78,14 @@ class RefinerConfig:
 
 
 def degrade_for_refiner(gt: torch.Tensor, mask: torch.Tensor, factor: int, noise: float,
-                        generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """``gt``, ``mask`` (1,1,H,W) → the cropped ``gt``, ``mask`` and the low-resolution input (0 where missing)."""
+                        generator: torch.Generator, kernel: str = "bicubic"
+                        ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """``gt``, ``mask`` (1,1,H,W) → the cropped ``gt``, ``mask`` and the low-resolution input (0 where missing);
+    ``kernel`` of :class:`~torch_depth_sr.transforms.Downsample` (``"area"``: the Park et al. inputs of
+    ``upsample-b``, whose noise is i.i.d. Gaussian on area-downsampled maps, measured σ ≈ 5 grey levels)."""
     h, w = (gt.shape[-2] // factor) * factor, (gt.shape[-1] // factor) * factor
     gt, mask = gt[..., :h, :w], mask[..., :h, :w]
-    low = Downsample(factor, "bicubic")({"depth": gt * (mask > 0)})["depth"]
+    low = Downsample(factor, kernel)({"depth": gt * (mask > 0)})["depth"]
     measured = gt[mask > 0]
     span = float(measured.max() - measured.min()) if measured.numel() else 0.0
     noisy = low + noise * span / 255.0 * torch.randn(low.shape, generator=generator)
@@ -143,7 +148,7 @@ def _degraded(s: dict, cfg: RefinerConfig, g: torch.Generator, job: tuple) -> tu
     """``(input, rgb, gt, mask)`` (1,C,·,·) of one job: ``(factor, noise)`` (upsample) or ``(track, σ, seed)``."""
     if cfg.task == "upsample":
         f, n = job
-        gt, mask, low = degrade_for_refiner(s["gt"][None], s["mask"][None], f, n, g)
+        gt, mask, low = degrade_for_refiner(s["gt"][None], s["mask"][None], f, n, g, cfg.downsample)
         return low, s["rgb"][None, :, : gt.shape[-2], : gt.shape[-1]], gt, mask
     from ..degradations import make_degradation
 
@@ -231,6 +236,8 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
     defaults with them."""
     if cfg.task not in ("upsample", "denoise"):
         raise ValueError(f"task={cfg.task!r}; allowed are 'upsample' and 'denoise'")
+    if cfg.reads_trust and cfg.task != "denoise":
+        raise ValueError("reads_trust needs task 'denoise': only there does the model hand its refiner a trust mask")
     if cfg.loss not in ("l1", "l2"):
         raise ValueError(f"loss={cfg.loss!r}; allowed are 'l1' and 'l2'")
     if cfg.init is None:
@@ -243,7 +250,8 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
 
 def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
     model = DepthRestorer(base.config.replace(refine_net=True, refine_channels=cfg.channels,
-                                              refine_layers=cfg.layers, refine_task=cfg.task))
+                                              refine_layers=cfg.layers, refine_task=cfg.task,
+                                              refine_reads_trust=cfg.reads_trust))
     state = {**{k: v for k, v in base.state_dict().items() if not k.startswith("refiner.")},
              **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}}
     model.load_state_dict(state)
@@ -260,7 +268,7 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     base = _base_model(cfg)
     train_scenes, val_scenes = _scenes(cfg)
     t0 = time.perf_counter()
-    refiner = EdgeRefiner(cfg.channels, cfg.layers, reads_trust=cfg.task == "denoise")  # as the model builds it
+    refiner = EdgeRefiner(cfg.channels, cfg.layers, cfg.reads_trust)
     train_samples = _samples(base, refiner, train_scenes, cfg, "training")
     val_samples = _samples(base, refiner, val_scenes, cfg, "validation")
     prepare_seconds = time.perf_counter() - t0
