@@ -89,7 +89,6 @@ class RestorerConfig:
     refine_channels: int = 32
     refine_layers: int = 6
     refine_task: str = "upsample"
-    refine_reads_trust: bool = False  # the network also reads which values are trusted measurements (denoising)
     init_singular: bool = False  # Q⁰ by the singular test against the guided estimate (else Q⁰ = measured)
     init_keep_observed: bool = True  # x⁰ keeps the measured values; the guided filter fills only the holes
     init_kernel_size: int = 11
@@ -456,15 +455,13 @@ class EdgeSnapConfig(_Group):
 class RefinerSettings(_Group):
     """The learned edge refiner after the model (:class:`~torch_depth_sr.refiner.EdgeRefiner`): on or off (``net``),
     ``channels`` wide with ``layers`` hidden convolutions, for one ``task``: ``"upsample"`` (runs when K ≠ I) or
-    ``"denoise"`` (runs when K = I), reading the trust mask of the values it is bounded by or not (``reads_trust``);
-    flat fields ``refine_*``."""
+    ``"denoise"`` (runs when K = I); flat fields ``refine_*``."""
 
     net: bool
     channels: int
     layers: int
     task: str
-    reads_trust: bool
-    _FLAT: ClassVar[dict] = _prefixed("refine_", "net", "channels", "layers", "task", "reads_trust")
+    _FLAT: ClassVar[dict] = _prefixed("refine_", "net", "channels", "layers", "task")
 
     def runs_for(self, upsampling: bool) -> bool:
         """Whether the refiner corrects an output of this task (upsampling or not)."""
@@ -788,7 +785,7 @@ _FIELD_CHECKS: dict[str, Callable[[str, Any], None]] = {
     "prior_on_singular": _bool, "init_singular": _bool, "guidance_net": _bool, "guidance_channels": _int(1), "init_keep_observed": _bool,
     "guidance_range": _real(1.0, lo_open=False),
     "refine_net": _bool, "refine_channels": _int(1), "refine_layers": _int(0),
-    "refine_task": _choice("upsample", "denoise"), "refine_reads_trust": _bool,
+    "refine_task": _choice("upsample", "denoise"),
     "init_kernel_size": _int(1),
     "init_sigma_space": _positive, "init_sigma_color": _positive,
     "init_dt_sigma_space": _positive, "init_dt_sigma_color": _positive, "init_dt_iterations": _int(1),

@@ -127,8 +127,7 @@ class DepthRestorer(nn.Module):
         self.refiner: Optional[EdgeRefiner] = None
         self.refine_settings = config.refiner
         if self.refine_settings.net:
-            self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers,
-                                       config.refine_reads_trust).requires_grad_(trainable)
+            self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers).requires_grad_(trainable)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod
@@ -261,8 +260,7 @@ class DepthRestorer(nn.Module):
                     x = refit_to_measurements(x, yn, observed, guide, **snap.refit_arguments(), active=~ctx.clean)
         if K.is_identity and self.refiner is not None and guide is not None and self.refine_settings.runs_for(False):
             with stage(ctx.log.timings, "refine", x.device):  # bounded by the trusted values around each pixel
-                trusted = state.q * observed
-                x = self.refiner(x, torch.where(trusted > 0, yn, x), guide, sigma.to(x) / scale, trusted)
+                x = self.refiner(x, torch.where(state.q * observed > 0, yn, x), guide, sigma.to(x) / scale)
         if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
             band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
             x = clamp_to_measurements(x, yn, state.q * observed, band)

@@ -39,8 +39,7 @@ from torch import nn
 __all__ = ["EdgeRefiner", "REFINER_FEATURES"]
 
 REFINER_FEATURES = 9
-"""Input channels of the network: four depth features, the noise level, the factor and the three colour channels
-(one more, the trust mask, when it reads one)."""
+"""Input channels of the network: four depth features, the noise level, the factor and the three colour channels."""
 
 _FEATURE_GAIN = 10.0  # features and output in units of r/10: a depth edge spans a few units, as the colour does
 
@@ -51,10 +50,6 @@ class EdgeRefiner(nn.Module):
     Args:
         channels: width of the hidden layers.
         layers: number of hidden 3×3 convolutions (after the first).
-        reads_trust: the network also reads which values of ``lowres`` are trusted measurements (1) and which the
-            model filled (0); only denoising hands it one. There ``lowres`` holds the model's own value in holes
-            and at the pixels the singular test distrusts, so without the mask a filled pixel looks like a
-            measurement the model agrees with.
 
     Examples:
         >>> ref = EdgeRefiner(channels=8, layers=1)
@@ -64,10 +59,9 @@ class EdgeRefiner(nn.Module):
         True
     """
 
-    def __init__(self, channels: int = 32, layers: int = 6, reads_trust: bool = False) -> None:
+    def __init__(self, channels: int = 32, layers: int = 6) -> None:
         super().__init__()
-        self.reads_trust = reads_trust
-        body: list[nn.Module] = [nn.Conv2d(REFINER_FEATURES + reads_trust, channels, 3, padding=1), nn.ReLU()]
+        body: list[nn.Module] = [nn.Conv2d(REFINER_FEATURES, channels, 3, padding=1), nn.ReLU()]
         for _ in range(layers):
             body += [nn.Conv2d(channels, channels, 3, padding=1), nn.ReLU()]
         body.append(nn.Conv2d(channels, 1, 3, padding=1))
@@ -93,21 +87,15 @@ class EdgeRefiner(nn.Module):
         factor = torch.full_like(x, math.log2(x.shape[-1] / lowres.shape[-1]) / 4)
         return torch.cat([depth, factor, rgb - rgb.mean((-2, -1), keepdim=True)], 1)
 
-    def prepare(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor, noise: Optional[torch.Tensor] = None,
-                trusted: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    def prepare(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor,
+                noise: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """``(features, lo, hi, unit)`` of a whole image: what :meth:`correct` reads (training crops them)."""
         factor = x.shape[-1] // lowres.shape[-1]
         lo, hi = self.bounds(lowres, factor)
         r = lowres.amax((-2, -1), keepdim=True) - lowres.amin((-2, -1), keepdim=True)
         unit = (r / _FEATURE_GAIN).clamp_min(torch.finfo(x.dtype).eps)
         level = torch.zeros_like(unit) if noise is None else noise.to(x).reshape(-1, 1, 1, 1).expand_as(unit)
-        phi = self.features(x, lowres, rgb.to(x.dtype), lo, hi, unit, level)
-        if self.reads_trust:
-            if trusted is None or trusted.shape[-2:] != x.shape[-2:]:
-                raise ValueError("this refiner reads a trust mask shaped like x; got "
-                                 f"{None if trusted is None else tuple(trusted.shape)}")
-            phi = torch.cat([phi, (trusted > 0).to(phi.dtype)], 1)
-        return phi, lo, hi, unit
+        return self.features(x, lowres, rgb.to(x.dtype), lo, hi, unit, level), lo, hi, unit
 
     def correct(self, x: torch.Tensor, phi: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
                 unit: torch.Tensor) -> torch.Tensor:
@@ -115,10 +103,9 @@ class EdgeRefiner(nn.Module):
         step = self.body(phi.to(self.body[0].weight.dtype)).to(x.dtype) * unit
         return torch.minimum(torch.maximum(x + step, lo), hi)
 
-    def forward(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor, noise: Optional[torch.Tensor] = None,
-                trusted: Optional[torch.Tensor] = None) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor,
+                noise: Optional[torch.Tensor] = None) -> torch.Tensor:
         """``x`` (B,1,H,W) the model's output, ``lowres`` (B,1,H/s,W/s) the input with no missing value (the model
         fills its holes from ``x``), ``rgb`` (B,3,H,W) in [0, 1], ``noise`` (B,) the input's white-noise σ in
-        ``x``'s units (None: 0, a clean input), ``trusted`` (B,1,H,W) which values of ``lowres`` are trusted
-        measurements (read when ``reads_trust``). Returns the refined (B,1,H,W), in ``x``'s dtype."""
-        return self.correct(x, *self.prepare(x, lowres, rgb, noise, trusted))
+        ``x``'s units (None: 0, a clean input). Returns the refined (B,1,H,W), in ``x``'s dtype."""
+        return self.correct(x, *self.prepare(x, lowres, rgb, noise))

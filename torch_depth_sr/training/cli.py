@@ -121,8 +121,6 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
                         "in grey levels (the paper/sensor tracks')")
     p.add_argument("--tracks", nargs="+", choices=["paper", "sensor"], default=list(d.tracks), help="task denoise")
     p.add_argument("--seeds", type=int, default=d.seeds, help="task denoise: draws per scene, track and σ")
-    p.add_argument("--reads-trust", action="store_true",
-                   help="task denoise: the refiner also reads which values are trusted measurements")
 
     p.add_argument("--channels", type=int, default=d.channels)
     p.add_argument("--layers", type=int, default=d.layers)
@@ -137,7 +135,7 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
         raise UsageError(f"--crop {args.crop} must be a multiple of every factor; got --factors {args.factors}")
     cfg = RefinerConfig(out=args.out, data=args.data, task=args.task, init=args.init, source=args.source,
                         base=json.loads(args.base), factors=tuple(args.factors), noises=tuple(args.noises),
-                        downsample=args.downsample, tracks=tuple(args.tracks), reads_trust=args.reads_trust, seeds=args.seeds, loss=args.loss, synthetic=args.synthetic,
+                        downsample=args.downsample, tracks=tuple(args.tracks), seeds=args.seeds, loss=args.loss, synthetic=args.synthetic,
                         val_scenes=tuple(args.val_scenes),
                         channels=args.channels, layers=args.layers, steps=args.steps, batch_size=args.batch_size,
                         crop=args.crop, lr=args.lr, val_every=args.val_every, seed=args.seed, threads=args.threads,

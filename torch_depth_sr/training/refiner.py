@@ -60,7 +60,6 @@ class RefinerConfig:
     noises: tuple = (0.0, 5.0, 10.0)
     tracks: tuple = ("paper", "sensor")  # task "denoise": the degradations
     seeds: int = 1  # task "denoise": draws of each degradation per scene and σ
-    reads_trust: bool = False  # the refiner reads the trust mask (task "denoise"; there the model hands it one)
     loss: str = "l1"  # "l1" or "l2", on known pixels in units of each image's range/10
     synthetic: int = 16  # procedural scenes (seeds 0..n−1), 240×320
     val_scenes: tuple = ("Cloth4", "Wood2")
@@ -127,8 +126,8 @@ def _scenes(cfg: RefinerConfig) -> tuple[list[dict], list[dict]]:
 class _Recorder(nn.Module):
     """Stands in for the refiner inside the model: keeps what the model hands it and returns ``x`` unchanged."""
 
-    def forward(self, x, lowres, rgb, noise, trusted=None):
-        self.args = (x, lowres, rgb, noise, trusted)
+    def forward(self, x, lowres, rgb, noise):
+        self.args = (x, lowres, rgb, noise)
         return x
 
 
@@ -178,9 +177,9 @@ def _samples(base: DepthRestorer, refiner: EdgeRefiner, scenes: list[dict], cfg:
         with _recorded(base, cfg.task) as recorder:
             info = base.restore_with_details(torch.where(low > 0, low, torch.full_like(low, float("nan"))),
                                              rgb).info
-        x, filled, guide, level, trusted = (None if a is None else a.float() for a in recorder.args)
+        x, filled, guide, level = (a.float() for a in recorder.args)
         offset, scale = info["offset"][0], info["scale"][0]
-        phi, lo, hi, unit = refiner.prepare(x, filled, guide, level, trusted)
+        phi, lo, hi, unit = refiner.prepare(x, filled, guide, level)
         out.append({"x": x, "phi": phi, "lo": lo, "hi": hi, "unit": unit, "gt": (gt - offset) / scale,
                     "mask": mask, "scale": scale, "factor": x.shape[-1] // low.shape[-1],
                     "name": f"{s['name']}/" + "/".join(f"{v:g}" if isinstance(v, float) else str(v) for v in job)})
@@ -236,8 +235,6 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
     defaults with them."""
     if cfg.task not in ("upsample", "denoise"):
         raise ValueError(f"task={cfg.task!r}; allowed are 'upsample' and 'denoise'")
-    if cfg.reads_trust and cfg.task != "denoise":
-        raise ValueError("reads_trust needs task 'denoise': only there does the model hand its refiner a trust mask")
     if cfg.loss not in ("l1", "l2"):
         raise ValueError(f"loss={cfg.loss!r}; allowed are 'l1' and 'l2'")
     if cfg.init is None:
@@ -250,8 +247,7 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
 
 def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
     model = DepthRestorer(base.config.replace(refine_net=True, refine_channels=cfg.channels,
-                                              refine_layers=cfg.layers, refine_task=cfg.task,
-                                              refine_reads_trust=cfg.reads_trust))
+                                              refine_layers=cfg.layers, refine_task=cfg.task))
     state = {**{k: v for k, v in base.state_dict().items() if not k.startswith("refiner.")},
              **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}}
     model.load_state_dict(state)
@@ -268,7 +264,7 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     base = _base_model(cfg)
     train_scenes, val_scenes = _scenes(cfg)
     t0 = time.perf_counter()
-    refiner = EdgeRefiner(cfg.channels, cfg.layers, cfg.reads_trust)
+    refiner = EdgeRefiner(cfg.channels, cfg.layers)
     train_samples = _samples(base, refiner, train_scenes, cfg, "training")
     val_samples = _samples(base, refiner, val_scenes, cfg, "validation")
     prepare_seconds = time.perf_counter() - t0
