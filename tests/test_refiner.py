@@ -221,8 +221,9 @@ def test_shipped_upsampler_treats_each_sample_of_a_batch_on_its_own():
 
 
 def test_shipped_denoise_refiner_does_no_harm_and_helps_on_a_held_out_crop():
-    """Middlebury Art (2005, never trained on): a clean 8-bit crop keeps every measured value, a noisy one
-    (`paper`, σ = 5) and a `sensor` one come out better than with the model alone (`denoise-guided`)."""
+    """Middlebury Art (2005, never trained on): a clean 8-bit crop keeps every measured value; the whole image with
+    the `paper` and the `sensor` degradation (σ = 5, the benchmark's draw) comes out better than with the model alone
+    (`denoise-guided`)."""
     import cv2
     import numpy as np
 
@@ -238,12 +239,13 @@ def test_shipped_denoise_refiner_does_no_harm_and_helps_on_a_held_out_crop():
     out = restore_depth(depth, rgb, model=refined)
     np.testing.assert_array_equal(out[depth > 0], depth[depth > 0])
     alone = DepthRestorer.from_pretrained("denoise-guided").eval()
-    gt = torch.from_numpy(depth.astype(np.float32))[None]
-    sample = {"gt": gt, "mask": (gt > 0).float(), "name": "Art-crop"}
-    guide = torch.from_numpy(rgb).permute(2, 0, 1)[None].float() / 255
+    whole = cv2.imread(str(art / "disp1.png"), cv2.IMREAD_UNCHANGED)
+    gt = torch.from_numpy(whole.astype(np.float32))[None]
+    sample = {"gt": gt, "mask": (gt > 0).float(), "name": "Art"}
+    guide = torch.from_numpy(cv2.imread(str(art / "view1.png"))[..., ::-1].copy()).permute(2, 0, 1)[None].float() / 255
     known = gt[None] > 0
     for track in ("paper", "sensor"):
-        noisy = make_degradation(track, sigma=5.0, seed=7)(sample)["depth"][None]
+        noisy = make_degradation(track, sigma=5.0, seed=0)(sample)["depth"][None]
         with torch.no_grad():
             e = [float((m(noisy, guide) - gt[None])[known].square().mean().sqrt()) for m in (alone, refined)]
         assert e[1] < e[0], (track, e)
