@@ -175,8 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--config", default=None,
                    help='JSON of RestorerConfig overrides for tv, tv+nl, full (e.g. \'{"block_size": 5}\')')
     b.add_argument("--pretrained", default=None, metavar="FOLDER",
-                   help="methods trained/trained-refined/trained-x4/trained-upsample (gdsr: trained) load this saved model folder "
-                        "(e.g. runs/x/best) instead of the shipped parameters")
+                   help="methods trained, trained-refined, trained-x4, trained-upsample(-area) (gdsr: trained) load "
+                        "this saved model folder (e.g. runs/x/best) instead of the shipped parameters")
     b.set_defaults(func=cmd_bench)
 
     from .training.cli import add_train_parser, add_train_refiner_parser

@@ -326,8 +326,12 @@ class DepthRestorer(nn.Module):
         """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README); ``overrides`` as
         :meth:`load` (e.g. ``snap_rounds=0, snap_refit_radius=0``: without the edge steps).
 
-        Names: ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same
-        with the guidance network's per-pixel thresholds), ``'upsample-x4'`` where shipped. Trained on the Middlebury 2006 scenes and synthetic scenes only.
+        Names (``torch_depth_sr/pretrained/README.md`` has each one's training command and measured effect):
+        ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same with the
+        guidance network's per-pixel thresholds), ``'denoise-refined'`` (that model plus the edge refiner; the best
+        denoiser), ``'upsample'`` (guided upsampling ×4–×16 with the edge refiner, bicubic-downsampled input),
+        ``'upsample-x4-refined'`` (×4 only), ``'upsample-area'`` (noisy area-downsampled input, ×2–×16),
+        ``'upsample-x4'`` (superseded). Trained on the Middlebury 2006 scenes and synthetic scenes only.
 
         Examples:
             >>> DepthRestorer.from_pretrained("denoise").config.num_layers  # doctest: +SKIP

@@ -53,11 +53,12 @@ RGF_PARAMS = {"paper": dict(sigma_space=3.0, sigma_color=7.0, iterations=3),
 
 # the methods that run shipped parameters (``from_pretrained(name)``): "trained-guided" with the guidance network's
 # per-pixel thresholds, "trained-refined" that model plus the edge refiner of denoising, "trained-upsample" the frozen
-# model plus the edge refiner at every factor (issue 14)
+# model plus the edge refiner at every factor, "trained-upsample-area" the same for area-downsampled noisy input
+# (the Park et al. inputs of upsample-b; issue 14)
 SHIPPED = {"trained": "denoise", "trained-guided": "denoise-guided", "trained-refined": "denoise-refined",
-           "trained-x4": "upsample-x4", "trained-upsample": "upsample"}
+           "trained-x4": "upsample-x4", "trained-upsample": "upsample", "trained-upsample-area": "upsample-area"}
 # those of them that load a saved candidate instead when ``pretrained`` is given
-TAKES_PRETRAINED = ("trained", "trained-refined", "trained-x4", "trained-upsample")
+TAKES_PRETRAINED = ("trained", "trained-refined", "trained-x4", "trained-upsample", "trained-upsample-area")
 _MODEL_METHODS = ("tv", "tv+nl", "full", "full-fast", "paper-model", *SHIPPED)
 
 
