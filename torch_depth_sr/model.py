@@ -258,17 +258,22 @@ class DepthRestorer(nn.Module):
                 x = snap_to_sides(x, guide, **snap.arguments(), active=~ctx.clean)
                 if snap.refit_radius > 0:
                     x = refit_to_measurements(x, yn, observed, guide, **snap.refit_arguments(), active=~ctx.clean)
-        if K.is_identity and self.refiner is not None and guide is not None and self.refine_settings.runs_for(False):
-            with stage(ctx.log.timings, "refine", x.device):  # bounded by the trusted values around each pixel
-                x = self.refiner(x, torch.where(state.q * observed > 0, yn, x), guide, sigma.to(x) / scale)
-        if K.is_identity and self.fidelity_band > 0:  # trusted measurements bound x on their own grid
-            band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
-            x = clamp_to_measurements(x, yn, state.q * observed, band)
-        elif not K.is_identity and self.initializer.upsampling.output_band > 0:  # do no harm on clean input
+        # the learned correction runs for the task it was trained for, each bounded by what was measured there
+        refining = self.refiner is not None and guide is not None and self.refine_settings.runs_for(not K.is_identity)
+        if K.is_identity:
+            trusted = state.q * observed
+            if refining:
+                with stage(ctx.log.timings, "refine", x.device):  # bounded by the trusted values around each pixel
+                    x = self.refiner(x, torch.where(trusted > 0, yn, x), guide, sigma.to(x) / scale)
+            if self.fidelity_band > 0:  # trusted measurements bound x on their own grid
+                band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
+                x = clamp_to_measurements(x, yn, trusted, band)
+        elif self.initializer.upsampling.output_band > 0 or refining:
             white = sigma if noise_sigma is not None else white_noise_sigma(y, observed)
-            x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
-                                white.to(sigma) / scale)
-            if self.refiner is not None and guide is not None and self.refine_settings.runs_for(True):
+            if self.initializer.upsampling.output_band > 0:  # do no harm on clean input
+                x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
+                                    white.to(sigma) / scale)
+            if refining:
                 with stage(ctx.log.timings, "refine", x.device):  # holes of the input: what the model made of them
                     x = self.refiner(x, torch.where(observed > 0, yn, K(x)), guide, white.to(x) / scale)
         if timed:

@@ -11,6 +11,7 @@ Many processes / machines (DistributedDataParallel, gloo on CPU, nccl on GPU)::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from typing import Optional, Sequence
@@ -121,7 +122,6 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
                         "in grey levels (the paper/sensor tracks')")
     p.add_argument("--tracks", nargs="+", choices=["paper", "sensor"], default=list(d.tracks), help="task denoise")
     p.add_argument("--seeds", type=int, default=d.seeds, help="task denoise: draws per scene, track and σ")
-
     p.add_argument("--channels", type=int, default=d.channels)
     p.add_argument("--layers", type=int, default=d.layers)
 
@@ -133,13 +133,10 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
 
     if args.task == "upsample" and args.crop % max(args.factors):
         raise UsageError(f"--crop {args.crop} must be a multiple of every factor; got --factors {args.factors}")
-    cfg = RefinerConfig(out=args.out, data=args.data, task=args.task, init=args.init, source=args.source,
-                        base=json.loads(args.base), factors=tuple(args.factors), noises=tuple(args.noises),
-                        downsample=args.downsample, tracks=tuple(args.tracks), seeds=args.seeds, loss=args.loss, synthetic=args.synthetic,
-                        val_scenes=tuple(args.val_scenes),
-                        channels=args.channels, layers=args.layers, steps=args.steps, batch_size=args.batch_size,
-                        crop=args.crop, lr=args.lr, val_every=args.val_every, seed=args.seed, threads=args.threads,
-                        progress=not args.no_progress)
+    # every flag is the RefinerConfig field of its name; lists become tuples, --base is JSON
+    given = {f.name: getattr(args, f.name) for f in dataclasses.fields(RefinerConfig) if hasattr(args, f.name)}
+    given = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items()}
+    cfg = RefinerConfig(**{**given, "base": json.loads(args.base), "progress": not args.no_progress})
     train_refiner(cfg)
     print(f"best model: {cfg.out}/best  (DepthRestorer.load('{cfg.out}/best'))")
     return 0
