@@ -144,3 +144,14 @@ def test_sensor_on_real_scene():
     assert torch.equal(out["depth"], again["depth"])
     with pytest.raises(DepthSRError, match="track"):
         make_degradation("upsample-a")
+
+
+def test_upsampling_metrics_also_score_the_output_as_an_8bit_png_stores_it():
+    from torch_depth_sr.evaluation.bench import _metrics
+
+    gt = torch.tensor([[[10.0, 20.0, 30.0, 40.0]]])
+    pred = torch.tensor([[[[10.3, 19.6, 30.0, 41.4]]]])
+    m = _metrics(pred, {"gt": gt}, "upsample-b")
+    assert m["mae"] == pytest.approx((0.3 + 0.4 + 0 + 1.4) / 4)
+    assert m["mae_8bit"] == pytest.approx(1 / 4)  # 10, 20, 30, 41 after rounding
+    assert m["rmse_8bit"] == pytest.approx(0.5)

@@ -124,6 +124,11 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seeds", type=int, default=d.seeds, help="task denoise: draws per scene, track and σ")
     p.add_argument("--channels", type=int, default=d.channels)
     p.add_argument("--layers", type=int, default=d.layers)
+    p.add_argument("--upscale", type=int, default=d.upscale,
+                   help="the Middlebury scenes at this many times their size (3: the pixel pitch of a full-size "
+                        "capture, as the upsample-b set)")
+    p.add_argument("--select", choices=["rmse", "mae"], default=d.select,
+                   help="the validation metric that picks best/")
 
 
 def cmd_train_refiner(args: argparse.Namespace) -> int:

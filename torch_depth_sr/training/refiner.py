@@ -62,6 +62,10 @@ class RefinerConfig:
     seeds: int = 1  # task "denoise": draws of each degradation per scene and σ
     loss: str = "l1"  # "l1" or "l2", on known pixels in units of each image's range/10
     synthetic: int = 16  # procedural scenes (seeds 0..n−1), 240×320
+    # the Middlebury scenes (training and validation) at this many times their size (training/upscale.py): the
+    # pixel pitch of a full-size capture is upscale 3
+    upscale: int = 1
+    select: str = "rmse"  # the validation metric that picks ``best``: "rmse" or "mae"
     val_scenes: tuple = ("Cloth4", "Wood2")
     channels: int = 32
     layers: int = 6
@@ -114,6 +118,10 @@ def _scenes(cfg: RefinerConfig) -> tuple[list[dict], list[dict]]:
             (valid if r.name.lower() in val else train).append({k: s[k] for k in ("rgb", "gt", "mask", "name")})
     else:
         raise ValueError(f"source={cfg.source!r}; allowed are 'middlebury2006' and 'gdsr'")
+    if cfg.upscale > 1:
+        from .upscale import upscale_scene
+
+        train, valid = ([upscale_scene(s, cfg.upscale) for s in group] for group in (train, valid))
     for j in range(cfg.synthetic):
         s = make_scene(240, 320, seed=j)
         train.append({k: s[k] for k in ("rgb", "gt", "mask", "name")})
@@ -219,15 +227,16 @@ def _loss(refiner: EdgeRefiner, batch: dict, loss: str = "l1") -> torch.Tensor:
 
 @torch.no_grad()
 def _validate(refiner: EdgeRefiner, samples: list[dict]) -> dict:
-    """Mean RMSE (in the input's units) over the validation samples (known pixels) of the refined and the unrefined
-    outputs."""
-    refined, plain = [], []
+    """Mean RMSE and MAE (in the input's units) over the validation samples (known pixels) of the refined and the
+    unrefined outputs."""
+    rows = []
     for s in samples:
         valid = s["mask"] > 0
         pred = refiner.correct(s["x"], s["phi"], s["lo"], s["hi"], s["unit"])
-        refined.append(float((pred - s["gt"])[valid].square().mean().sqrt()) * s["scale"])
-        plain.append(float((s["x"] - s["gt"])[valid].square().mean().sqrt()) * s["scale"])
-    return {"rmse": float(np.mean(refined)), "rmse_model": float(np.mean(plain))}
+        errors = [((v - s["gt"])[valid] * s["scale"]) for v in (pred, s["x"])]
+        rows.append([float(e.square().mean().sqrt()) for e in errors] + [float(e.abs().mean()) for e in errors])
+    rmse, rmse_model, mae, mae_model = np.mean(rows, 0).tolist()
+    return {"rmse": rmse, "rmse_model": rmse_model, "mae": mae, "mae_model": mae_model}
 
 
 def _base_model(cfg: RefinerConfig) -> DepthRestorer:
@@ -237,6 +246,10 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
         raise ValueError(f"task={cfg.task!r}; allowed are 'upsample' and 'denoise'")
     if cfg.loss not in ("l1", "l2"):
         raise ValueError(f"loss={cfg.loss!r}; allowed are 'l1' and 'l2'")
+    if cfg.select not in ("rmse", "mae"):
+        raise ValueError(f"select={cfg.select!r}; allowed are 'rmse' and 'mae'")
+    if cfg.upscale < 1:
+        raise ValueError(f"upscale={cfg.upscale!r}; allowed is a whole number >= 1")
     if cfg.init is None:
         k = {"degradation": "bicubic"} if cfg.task == "upsample" else {}
         return DepthRestorer(**{**k, **cfg.base}).eval()
@@ -271,7 +284,7 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     opt = torch.optim.Adam(refiner.parameters(), lr=cfg.lr)
     rng = np.random.default_rng(cfg.seed)
     history = [{"step": 0, **_validate(refiner, val_samples)}]
-    best = {"step": 0, "rmse": history[0]["rmse"]}
+    best = {"step": 0, cfg.select: history[0][cfg.select]}
     _export(base, refiner, cfg, out / "best")
     from tqdm import tqdm
 
@@ -288,9 +301,10 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
         if step % cfg.val_every == 0 or step == cfg.steps:
             row = {"step": step, **_validate(refiner, val_samples), "seconds": time.perf_counter() - t1}
             history.append(row)
-            bar.write(f"step {step:>5d}  val rmse {row['rmse']:.4f} (model alone {row['rmse_model']:.4f})")
-            if row["rmse"] < best["rmse"]:
-                best = {"step": step, "rmse": row["rmse"]}
+            bar.write(f"step {step:>5d}  val rmse {row['rmse']:.4f} mae {row['mae']:.4f} "
+                      f"(model alone {row['rmse_model']:.4f} / {row['mae_model']:.4f})")
+            if row[cfg.select] < best[cfg.select]:
+                best = {"step": step, cfg.select: row[cfg.select]}
                 _export(base, refiner, cfg, out / "best")
     _export(base, refiner, cfg, out / "last")
     (out / "history.json").write_text(json.dumps({"history": history, "best": best,
