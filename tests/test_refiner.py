@@ -163,6 +163,30 @@ def test_train_refiner_command_runs_and_exports_a_model(tmp_path, monkeypatch):
     assert model.refiner is not None and model.config.num_layers == 1
 
 
+def test_train_refiner_evaluate_scores_saved_models_on_the_recipes_validation_samples(tmp_path, monkeypatch):
+    """--evaluate trains nothing: the shipped area upsampler, scored on this recipe's validation samples (here the
+    two held-out synthetic scenes, area ×4 with noise), beats the frozen model it refines, per group and overall;
+    a model whose frozen part is not the recipe's is refused, by name."""
+    monkeypatch.setenv("TORCH_DEPTH_SR_DATA", str(tmp_path / "no-data"))
+    out = tmp_path / "val"
+    recipe = ["train-refiner", "--out", str(out), "--factors", "4", "--noises", "5", "--synthetic", "0",
+              "--downsample", "area", "--base", '{"degradation": "area"}', "--no-progress"]
+    assert main(recipe + ["--evaluate", "upsample-area"]) == 0
+    rows = json.loads((out / "validation.json").read_text())
+    assert [(r["model"], r["group"], r["samples"]) for r in rows] == [("upsample-area", "all", 2),
+                                                                     ("upsample-area", "4", 2)]
+    assert all(r["mae"] < r["mae_model"] and r["rmse"] < r["rmse_model"] for r in rows), rows
+
+
+def test_train_refiner_evaluate_refuses_a_model_of_another_frozen_model(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("TORCH_DEPTH_SR_DATA", str(tmp_path / "no-data"))
+    rc = main(["train-refiner", "--out", str(tmp_path / "val"), "--factors", "4", "--noises", "5",
+               "--base", '{"degradation": "area"}', "--no-progress", "--evaluate", "upsample"])
+    assert rc != 0
+    err = capsys.readouterr().err
+    assert "upsample" in err and "degradation" in err and not (tmp_path / "val" / "validation.json").exists()
+
+
 def test_train_refiner_refuses_a_crop_that_no_factor_divides(capsys):
     assert main(["train-refiner", "--factors", "16", "--crop", "40"]) != 0
     assert "--crop 40" in capsys.readouterr().err

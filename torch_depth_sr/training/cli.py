@@ -129,6 +129,9 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
                         "capture, as the upsample-b set)")
     p.add_argument("--select", choices=["rmse", "mae"], default=d.select,
                    help="the validation metric that picks best/")
+    p.add_argument("--evaluate", nargs="+", default=None, metavar="MODEL",
+                   help="train nothing: score these saved folders or pretrained names on this recipe's validation "
+                        "samples (e.g. --upscale 3 for runs trained at other pitches) and write <out>/validation.json")
 
 
 def cmd_train_refiner(args: argparse.Namespace) -> int:
@@ -142,8 +145,27 @@ def cmd_train_refiner(args: argparse.Namespace) -> int:
     given = {f.name: getattr(args, f.name) for f in dataclasses.fields(RefinerConfig) if hasattr(args, f.name)}
     given = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items()}
     cfg = RefinerConfig(**{**given, "base": json.loads(args.base), "progress": not args.no_progress})
+    if args.evaluate:
+        return _evaluate(cfg, args.evaluate)
     train_refiner(cfg)
     print(f"best model: {cfg.out}/best  (DepthRestorer.load('{cfg.out}/best'))")
+    return 0
+
+
+def _evaluate(cfg, models: list[str]) -> int:
+    """``train-refiner --evaluate``: the validation table of saved models, printed and written as JSON."""
+    from pathlib import Path
+
+    from .refiner import evaluate_refiners
+
+    rows = evaluate_refiners(cfg, models)
+    print(f"{'model':<40} {'group':>6} {'mae':>8} {'rmse':>8} {'mae model':>10} {'rmse model':>11}")
+    for r in rows:
+        print(f"{r['model']:<40} {r['group']:>6} {r['mae']:8.4f} {r['rmse']:8.4f} {r['mae_model']:10.4f} "
+              f"{r['rmse_model']:11.4f}")
+    Path(cfg.out).mkdir(parents=True, exist_ok=True)
+    (Path(cfg.out) / "validation.json").write_text(json.dumps(rows, indent=2))
+    print(f"json: {cfg.out}/validation.json")
     return 0
 
 

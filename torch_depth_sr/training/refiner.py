@@ -18,6 +18,8 @@ Two tasks (``task``):
 
 Output: ``<out>/best`` and ``<out>/last``, :meth:`DepthRestorer.save` folders of the base model with
 ``refine_net=True`` (``refine_task`` the task) and the refiner's weights, and ``<out>/history.json``.
+:func:`evaluate_refiners` scores saved models on one recipe's validation samples (runs compared on one set, e.g. at
+the test pitch, whatever pitch each was trained at).
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from ..refiner import EdgeRefiner
 from ..transforms import Downsample
 from .datasets import middlebury_records
 
-__all__ = ["RefinerConfig", "degrade_for_refiner", "train_refiner"]
+__all__ = ["RefinerConfig", "degrade_for_refiner", "evaluate_refiners", "train_refiner"]
 
 
 @dataclass
@@ -312,3 +314,38 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
                                                   "parameters": sum(p.numel() for p in refiner.parameters())},
                                                  indent=2))
     return refiner
+
+
+def evaluate_refiners(cfg: RefinerConfig, models: list[str]) -> list[dict]:
+    """The validation figures of saved models (folders or pretrained names, each with a refiner for ``cfg.task``) on
+    the validation samples of ``cfg`` (its scenes, degradations and ``upscale``): one row per model and group (all,
+    then each factor or track) with ``rmse``, ``mae`` and the frozen model's ``rmse_model``, ``mae_model``. The
+    refiners see the frozen model of ``cfg`` (its inputs are recorded once); a model whose own frozen part differs
+    is refused."""
+    from ..errors import UsageError
+
+    torch.set_num_threads(max(1, cfg.threads))
+    base = _base_model(cfg)
+    loaded = {}
+    for name in models:
+        model = DepthRestorer.load(name) if Path(name).is_dir() else DepthRestorer.from_pretrained(name)
+        if model.refiner is None:
+            raise UsageError(f"{name}: has no refiner (refine_net is off)")
+        settings = [{k: v for k, v in asdict(m.config).items() if not k.startswith("refine")} for m in (model, base)]
+        weights = [{k: v for k, v in m.state_dict().items() if not k.startswith("refiner.")} for m in (model, base)]
+        differ = sorted(k for k in settings[1] if settings[0].get(k) != settings[1][k])
+        differ += sorted(k for k in weights[1] if k not in weights[0] or not torch.equal(weights[0][k], weights[1][k]))
+        if differ:
+            raise UsageError(f"{name}: its frozen model is not this recipe's (--init/--base); it differs in {differ}")
+        loaded[name] = model.refiner.eval()
+    _, val_scenes = _scenes(cfg)
+    samples = _samples(base, EdgeRefiner(cfg.channels, cfg.layers), val_scenes, cfg, "validation")
+    groups = {"all": samples}
+    for s in samples:  # the job's first field: the factor (upsample) or the track (denoise)
+        groups.setdefault(s["name"].split("/")[1], []).append(s)
+    rows = []
+    with torch.no_grad():
+        for name, refiner in loaded.items():
+            rows += [{"model": name, "group": g, "samples": len(group), **_validate(refiner, group)}
+                     for g, group in groups.items()]
+    return rows
