@@ -191,7 +191,7 @@ def _samples(base: DepthRestorer, refiner: EdgeRefiner, scenes: list[dict], cfg:
         offset, scale = info["offset"][0], info["scale"][0]
         phi, lo, hi, unit = refiner.prepare(x, filled, guide, level)
         out.append({"x": x, "phi": phi, "lo": lo, "hi": hi, "unit": unit, "gt": (gt - offset) / scale,
-                    "mask": mask, "scale": scale, "factor": x.shape[-1] // low.shape[-1],
+                    "mask": mask, "scale": scale, "factor": x.shape[-1] // low.shape[-1], "job": job,
                     "name": f"{s['name']}/" + "/".join(f"{v:g}" if isinstance(v, float) else str(v) for v in job)})
     return out
 
@@ -255,9 +255,14 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
     if cfg.init is None:
         k = {"degradation": "bicubic"} if cfg.task == "upsample" else {}
         return DepthRestorer(**{**k, **cfg.base}).eval()
-    if Path(cfg.init).is_dir():
-        return DepthRestorer.load(cfg.init, **cfg.base).eval()
-    return DepthRestorer.from_pretrained(cfg.init, **cfg.base).eval()
+    return _saved_model(cfg.init, **cfg.base)
+
+
+def _saved_model(name: str, **overrides) -> DepthRestorer:
+    """A saved folder or a pretrained name, in eval mode."""
+    if Path(name).is_dir():
+        return DepthRestorer.load(name, **overrides).eval()
+    return DepthRestorer.from_pretrained(name, **overrides).eval()
 
 
 def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
@@ -328,9 +333,10 @@ def evaluate_refiners(cfg: RefinerConfig, models: list[str]) -> list[dict]:
     base = _base_model(cfg)
     loaded = {}
     for name in models:
-        model = DepthRestorer.load(name) if Path(name).is_dir() else DepthRestorer.from_pretrained(name)
-        if model.refiner is None:
-            raise UsageError(f"{name}: has no refiner (refine_net is off)")
+        model = _saved_model(name)
+        if model.refiner is None or model.refine_settings.task != cfg.task:
+            raise UsageError(f"{name}: has no refiner for task {cfg.task!r} (refine_net "
+                             f"{model.refiner is not None}, refine_task {model.refine_settings.task!r})")
         settings = [{k: v for k, v in asdict(m.config).items() if not k.startswith("refine")} for m in (model, base)]
         weights = [{k: v for k, v in m.state_dict().items() if not k.startswith("refiner.")} for m in (model, base)]
         differ = sorted(k for k in settings[1] if settings[0].get(k) != settings[1][k])
@@ -342,7 +348,7 @@ def evaluate_refiners(cfg: RefinerConfig, models: list[str]) -> list[dict]:
     samples = _samples(base, EdgeRefiner(cfg.channels, cfg.layers), val_scenes, cfg, "validation")
     groups = {"all": samples}
     for s in samples:  # the job's first field: the factor (upsample) or the track (denoise)
-        groups.setdefault(s["name"].split("/")[1], []).append(s)
+        groups.setdefault(str(s["job"][0]), []).append(s)
     rows = []
     with torch.no_grad():
         for name, refiner in loaded.items():
