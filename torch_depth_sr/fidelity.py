@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import torch
 
+from .band import clamp_between
+
 __all__ = ["clamp_to_measurements", "noise_band"]
 
 def noise_band(step: torch.Tensor, sigma: torch.Tensor, width: float) -> torch.Tensor:
@@ -44,5 +46,5 @@ def clamp_to_measurements(x: torch.Tensor, y: torch.Tensor, trusted: torch.Tenso
         tensor([[[[1.0000, 2.5000, 9.0000]]]])
     """
     b4 = band.to(x).view(-1, 1, 1, 1)
-    held = torch.minimum(torch.maximum(x, y - b4), y + b4)
+    held = clamp_between(x, y - b4, y + b4)
     return torch.where(trusted > 0, held, x)

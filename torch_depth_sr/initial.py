@@ -1,47 +1,44 @@
-"""The state before the first layer: x⁰ on the observation grid (:func:`initial_estimate`, a colour-guided fill) and
-on the output grid (:func:`~torch_depth_sr.upsampling.upsample_initial` under guided upsampling), Q⁰ and the first
-matches and α⁰; and the module that owns their settings and builds it, :class:`Initializer`.
-"""
+"""The state before the first layer, one module per task: :class:`DenoiseInit` (x⁰ on the observation grid,
+:func:`initial_estimate`, a colour-guided fill; Q⁰; the guided prior's target) and :class:`UpsampleInit` (x⁰ filled
+on the observation grid and carried to the output grid, :func:`~torch_depth_sr.upsampling.bounded_upsample`). Both
+match x⁰ and compute α⁰ for the layers, and return what they computed that later stages read
+(:class:`InitialEstimate`)."""
 from __future__ import annotations
 
-from typing import Optional, Union
+from dataclasses import replace
+from typing import NamedTuple, Optional, Union
 
 import torch
 from torch import nn
 
-from .config import InitConfig, LayerConfig, RestorerConfig, UpsamplingConfig
-from .fill import fill_holes
+from .config import InitConfig, RestorerConfig, SidedFill, UpsamplingConfig
+from .fill import fill_holes, fill_holes_sided
+from .guided_filters import domain_transform_filter, joint_bilateral_filter
 from .nonlocal_prior import nonlocal_terms
-from .operators import Degradation, area_downsample, grad
+from .observation import Observation
+from .operators import area_downsample, grad
 from .stages import SingularDetector
-from .state import RestorationContext, RestorationState
-from .upsampling import upsample_initial
+from .state import RestorationState
+from .upsampling import UpsamplingReference, bounded_upsample, upsampling_reference
 
-__all__ = ["Initializer", "initial_estimate"]
+__all__ = ["DenoiseInit", "InitialEstimate", "UpsampleInit", "initial_estimate", "initial_stages"]
 
 
 def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
-                     c: InitConfig | RestorerConfig, return_fill: bool = False
+                     c: InitConfig, sided_fill: Optional[SidedFill] = None, return_fill: bool = False
                      ) -> Union[Optional[torch.Tensor], tuple[Optional[torch.Tensor], torch.Tensor, torch.Tensor]]:
     """x⁰ on the observation grid: a colour-guided normalised convolution, or push-pull without colour.
 
-    ``c`` is the :class:`~torch_depth_sr.config.InitConfig` (or a whole :class:`RestorerConfig`, whose
-    ``initial`` group is used); ``factor`` is the ratio of the guide's grid to the depth's (the guide is
+    ``c`` is the :class:`~torch_depth_sr.config.InitConfig`; ``factor`` is the ratio of the guide's grid to the depth's (the guide is
     area-averaged to the depth's grid). ``c.fill``: ``"domain"`` — masked domain-transform filter
     (:func:`~torch_depth_sr.guided_filters.domain_transform_filter`, ``dt_*``); ``"jbf"`` — masked joint
     bilateral filter (:func:`~torch_depth_sr.guided_filters.joint_bilateral_filter`, ``kernel_size``,
     ``sigma_*``); ``"pushpull"`` (or no guide) — :func:`~torch_depth_sr.fill.fill_holes`.
-    Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` (unless ``c.sided_fill`` is None:
-    ``config.extra["sided_fill"]`` False, or ``init_fill == "pushpull"``): a hole next to a depth gap takes the
-    values of one side. With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}:
+    Holes are filled by :func:`~torch_depth_sr.fill.fill_holes_sided` when ``sided_fill`` is given: a hole next to
+    a depth gap takes the values of one side. With ``return_fill`` it returns ``(estimate, confident, sided)``, both (B,1,h,w) {0,1}:
     ``confident`` = measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from
     one side.
     """
-    from .fill import fill_holes_sided
-    from .guided_filters import domain_transform_filter, joint_bilateral_filter
-
-    if isinstance(c, RestorerConfig):
-        c = c.initial
     if guide is None or c.fill == "pushpull":
         est = fill_holes(yn, observed)
         g = None
@@ -59,12 +56,12 @@ def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[t
             raise ValueError(f"init_fill={c.fill!r}; allowed are 'domain', 'jbf' and 'pushpull'.")
     confident = torch.ones_like(observed)
     one_side = torch.zeros_like(observed)
-    if c.sided_fill is not None and not bool((observed > 0).all()):
-        ambiguous = c.sided_fill.ambiguous
+    if sided_fill is not None and not bool((observed > 0).all()):
+        ambiguous = sided_fill.ambiguous
         kernel = max(3, min(c.kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
         with torch.no_grad():
             r = fill_holes_sided(yn.detach(), observed, g, kernel_size=kernel, sigma_space=c.sigma_space,
-                                 sigma_color=c.sigma_color, **c.sided_fill.fill_arguments())
+                                 sigma_color=c.sigma_color, **sided_fill.fill_arguments())
         # ambiguous="mix": a hole whose side is not clear keeps the weighted mean of both (marked unconfident)
         take = (r.confident > 0) | (ambiguous != "mix") | (g is None)
         hole = observed <= 0
@@ -74,77 +71,106 @@ def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[t
     return (est, confident, one_side) if return_fill else est
 
 
-class Initializer(nn.Module):
-    """The state before the first layer (:meth:`forward`: x⁰, Q⁰, the first matches, α⁰) by the
-    :class:`~torch_depth_sr.config.InitConfig` ``settings`` (the colour-guided fill on the observation grid, which
-    measurements it keeps, whether Q⁰ comes from the singular test) and the
-    :class:`~torch_depth_sr.config.UpsamplingConfig` ``upsampling`` (x⁰ on the output grid under guided
-    upsampling). The block matcher and the singular detector it runs are the model's, passed in."""
+class InitialEstimate(NamedTuple):
+    """What the initial stage returns: the state before the first layer, and what later stages read."""
 
-    def __init__(self, settings: InitConfig, upsampling: UpsamplingConfig):
+    state: RestorationState
+    fill_confident: torch.Tensor  # (B,1,h,w) {0,1}: measured, or a hole filled from a clear side (fill="trusted")
+    prior: Optional[torch.Tensor] = None  # (B,1,H,W) the guided prior's target (denoising with a guide)
+    supported: Optional[torch.Tensor] = None  # (B,1,h,w) pixels every singular test trusts (denoising)
+    reference: Optional[UpsamplingReference] = None  # what x⁰ was upsampled from (the output hold rebuilds it)
+
+
+class _Initial(nn.Module):
+    """The colour-guided estimate on the observation grid and x⁰ there, by ``settings``
+    (:class:`~torch_depth_sr.config.InitConfig`) and ``sided_fill``; whether x⁰ is matched (for the nonlocal term or
+    the singular test) and α⁰ computed (``nonlocal_``)."""
+
+    def __init__(self, settings: InitConfig, sided_fill: Optional[SidedFill], matches: bool, nonlocal_: bool):
         super().__init__()
-        self.settings = settings
-        self.upsampling = upsampling
+        self.settings, self.sided_fill = settings, sided_fill
+        self.matches, self.nonlocal_ = matches, nonlocal_
 
-    @property
-    def detects_singular(self) -> bool:
-        """Whether Q⁰ comes from the singular test against the guided estimate (``settings.singular``)."""
-        return self.settings.singular
-
-    def guided(self, y: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor],
-               K: Degradation) -> tuple[torch.Tensor, torch.Tensor]:
+    def guided(self, obs: Observation) -> tuple[torch.Tensor, torch.Tensor]:
         """The colour-guided estimate of every pixel on the observation grid and where its fill is confident, both
-        (B,1,h,w) (:func:`initial_estimate`; ``guide`` on the output grid, ``K.scale`` times finer)."""
-        est, confident, _ = initial_estimate(y, observed, guide, K.scale, self.settings, return_fill=True)
+        (B,1,h,w) (:func:`initial_estimate`)."""
+        est, confident, _ = initial_estimate(obs.y, obs.observed, obs.rgb, obs.K.scale, self.settings,
+                                             self.sided_fill, return_fill=True)
         return est, confident
 
-    def observation_grid(self, y: torch.Tensor, observed: torch.Tensor, guided: torch.Tensor,
-                         trusted: Optional[torch.Tensor] = None) -> torch.Tensor:
-        """x⁰ on the observation grid: ``y`` where ``trusted`` (Q⁰ of the singular test) when given, else ``y`` at
-        the measured pixels with ``settings.keep_observed``, the ``guided`` estimate elsewhere."""
-        if trusted is not None:
-            return torch.where(trusted > 0, y, guided)
+    def observation_grid(self, obs: Observation, guided: torch.Tensor) -> torch.Tensor:
+        """x⁰ on the observation grid: ``y`` at the measured pixels with ``settings.keep_observed``, the ``guided``
+        estimate elsewhere."""
         keep = self.settings.keep_observed and guided is not None
-        return torch.where(observed > 0, y, guided) if keep else guided
+        return torch.where(obs.observed > 0, obs.y, guided) if keep else guided
 
-    def output_grid(self, x0: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
-                    noise: Optional[torch.Tensor] = None) -> torch.Tensor:
-        """x⁰ on the output grid from ``x0`` on the observation grid: itself when ``K`` is the identity, else
-        :func:`~torch_depth_sr.upsampling.upsample_initial` (``noise (B,)``: the noise σ in the units of ``x0``)."""
-        if K.is_identity:
-            return x0
-        return upsample_initial(x0, observed, guide, K.scale, self.upsampling, noise=noise, degradation=K)
-
-    def forward(self, ctx: RestorationContext, terms: LayerConfig, singular_detector: SingularDetector,
-                noise: Optional[torch.Tensor] = None) -> RestorationState:
-        """The state before the first layer: x⁰, Q⁰ and the first matches and α⁰ of the observation ``ctx.y`` (in
-        units of the scale, 0 where missing) under ``ctx.K``; sets ``ctx.fill_confident`` and, for denoising with
-        a guided prior, ``ctx.prior``. ``terms`` says which terms the layers compute (whether x⁰ needs matches, a
-        prior); matching goes through ``ctx.block_matcher``; ``noise (B,)``: the noise σ in the units of ``y``."""
-        y, observed, guide, K = ctx.y, ctx.observed, ctx.rgb, ctx.K
-        # colour-guided estimate on the observation grid, every pixel; holes at depth gaps filled from one side
-        guided, ctx.fill_confident = self.guided(y, observed, guide, K)
-        x0 = self.observation_grid(y, observed, guided)
-        matches, q, conf = None, observed, observed
-        # the singular test compares the estimate with the observation pixel by pixel: K = I only
-        if terms.use_singular and K.is_identity and self.detects_singular and guide is not None:
-            # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
-            # those of the raw input; singular pixels start from the guided value instead of y.
-            q, conf = singular_detector(ctx, guided, ctx.block_matcher(guided, ctx, observed))
-            x0 = self.observation_grid(y, observed, guided, trusted=q)
-        if not K.is_identity:  # x⁰ to the output grid
-            ctx.lowres = x0  # kept for the do-no-harm hold of the output (upsampling.hold_to_initial)
-            x0 = self.output_grid(x0, observed, guide, K, noise=noise)
-        elif guide is not None and terms.guided_prior > 0:  # the guided estimate lives on the output grid
-            ctx.prior = guided
+    def start(self, x0: torch.Tensor, obs: Observation, q: torch.Tensor, conf: torch.Tensor,
+              clean: Optional[torch.Tensor]) -> RestorationState:
+        """The state at x⁰: its matches (untrusted = unmeasured pixels masked) and α⁰ when the layers need them."""
         zeros2 = x0.new_zeros(x0.shape[0], 2, *x0.shape[-2:])
-        alpha = zeros2
-        if terms.use_nonlocal or (terms.use_singular and K.is_identity):  # match x⁰ for the nonlocal term
-            matches = ctx.block_matcher(x0, ctx, observed)
-        if terms.use_nonlocal:
+        alpha, matches = zeros2, None
+        if self.matches:
+            matches = obs.block_matcher(x0, obs, obs.observed)
+        if self.nonlocal_:
             alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
-        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(y), alpha=alpha, q=q,
-                                confidence=conf, matches=matches)
+        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(obs.y), alpha=alpha, q=q,
+                                confidence=conf, matches=matches, clean=clean)
 
     def extra_repr(self) -> str:
-        return f"fill={self.settings.fill!r}, upsampling={self.upsampling.init!r}"
+        return f"fill={self.settings.fill!r}, sided_fill={self.sided_fill is not None}"
+
+
+class DenoiseInit(_Initial):
+    """x⁰ = the measurement with its holes filled by the colour-guided estimate; Q⁰ = measured, or from the
+    singular test against the guided estimate (``settings.singular``, with a ``singular`` test in the model); the
+    guided estimate is also the guided prior's target (``guided_prior``)."""
+
+    def __init__(self, settings: InitConfig, sided_fill: Optional[SidedFill], singular: Optional[SingularDetector],
+                 guided_prior: bool, nonlocal_: bool):
+        super().__init__(settings, sided_fill, matches=nonlocal_ or singular is not None, nonlocal_=nonlocal_)
+        self.singular = singular  # the model's detector (not a copy): Q⁰ and the supported pixels
+        self.guided_prior = guided_prior
+
+    def forward(self, obs: Observation) -> InitialEstimate:
+        guided, confident = self.guided(obs)  # holes at depth gaps filled from one side
+        x0 = self.observation_grid(obs, guided)
+        q, conf, clean = obs.observed, obs.observed, None
+        supported = None if self.singular is None else self.singular.supported(obs)
+        if self.singular is not None and self.settings.singular and obs.rgb is not None:
+            # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
+            # those of the raw input; singular pixels start from the guided value instead of y.
+            tested = replace(obs, supported=supported)
+            q, conf, clean = self.singular(tested, guided, obs.block_matcher(guided, tested, obs.observed))
+            x0 = torch.where(q > 0, obs.y, guided)
+        prior = guided if self.guided_prior and obs.rgb is not None else None
+        return InitialEstimate(self.start(x0, obs, q, conf, clean), confident, prior=prior, supported=supported)
+
+
+class UpsampleInit(_Initial):
+    """x⁰ filled on the observation grid, then carried to the output grid by
+    :func:`~torch_depth_sr.upsampling.bounded_upsample` (``upsampling``); Q⁰ = measured."""
+
+    def __init__(self, settings: InitConfig, sided_fill: Optional[SidedFill], upsampling: UpsamplingConfig,
+                 nonlocal_: bool):
+        super().__init__(settings, sided_fill, matches=nonlocal_, nonlocal_=nonlocal_)
+        self.upsampling = upsampling
+
+    def forward(self, obs: Observation) -> InitialEstimate:
+        guided, confident = self.guided(obs)
+        x0_lr = self.observation_grid(obs, guided)
+        ref = upsampling_reference(x0_lr, obs.observed, obs.rgb, obs.K.scale, self.upsampling)
+        x0 = bounded_upsample(ref, obs.K, self.upsampling, noise=obs.noise)
+        state = self.start(x0, obs, obs.observed, obs.observed, None)
+        return InitialEstimate(state, confident, reference=ref)
+
+    def extra_repr(self) -> str:
+        return super().extra_repr() + f", upsampling={self.upsampling.init!r}"
+
+
+def initial_stages(config: RestorerConfig, singular: Optional[SingularDetector]) -> nn.ModuleDict:
+    """The initial stage per task; ``singular`` is the model's detector when the layers run the singular test."""
+    nonlocal_ = config.uses("nonlocal")
+    return nn.ModuleDict({
+        "denoise": DenoiseInit(config.initial, config.sided_fill, singular, config.guided_prior is not None,
+                               nonlocal_),
+        "upsample": UpsampleInit(config.initial, config.sided_fill, config.upsampling, nonlocal_)})

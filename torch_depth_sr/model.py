@@ -6,15 +6,18 @@ Objective (paper eq. 2-8, restored in model.md):
     \min_{x,e}\ \tfrac12\|Q\odot(y-Kx-e)\|^2 + \lambda\|Dx\|_1 + \eta\|Dx-\alpha\|_1 + \gamma\|e\|_1
 
 solved by half-quadratic splitting, one :class:`~torch_depth_sr.layers.UnrolledLayer` per iteration.
-The task is the degradation ``K`` (:func:`~torch_depth_sr.operators.degradation_operator`: the identity for
-denoising, area or bicubic downsampling by ``s`` for guided upsampling), built once per forward from the
-config's ``degradation`` and the sizes of the inputs and handed to the initial estimate and every layer.
+
+A forward is a pipeline of named stages (``repr(model)`` shows them in order): the scale policy
+(:func:`~torch_depth_sr.observation.observe`, which builds the degradation ``K`` from the config's ``degradation``
+and the sizes of the inputs — the identity for denoising, area or bicubic downsampling by ``s`` for guided
+upsampling — and with it the task), the initial stage of the task (``init[task]``), the layers, and the post-steps
+of the task (``post[task]``).
 """
 from __future__ import annotations
 
-import dataclasses
 import pickle
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple, Optional, Sequence, Union
 
@@ -22,29 +25,23 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ._checks import check_noise_sigma, check_scale_factor
+from ._checks import check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import ABLATIONS, PRESETS, SIDED_FILL_DEFAULTS, RestorerConfig, load_config_file
-from .edge_snap import refit_to_measurements, snap_to_sides
+from .config import RestorerConfig, load_config_file, preset_config
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
-from .fidelity import clamp_to_measurements, noise_band
 from .guidance import GuidanceNet
-from .initial import Initializer, initial_estimate
+from .initial import InitialEstimate, initial_stages
 from .layers import UnrolledLayer
-from .noise import depth_scale, implausible, quantisation_step, white_noise_sigma
+from .observation import Observation, observe
 from .operators import degradation_operator
+from .post_steps import post_steps
 from .refiner import EdgeRefiner
 from .stages import BlockMatcher, SingularDetector
-from .state import RestorationContext, RunLog, stage
-from .upsampling import hold_to_initial, upsample_initial
 
 __all__ = [
     "RestorationResult",
     "DepthRestorer",
-    "SIDED_FILL_DEFAULTS",
-    "initial_estimate",
     "FILL_MODES",
-    "upsample_initial",
     "restore_depth",
     "NoiseSigma",
 ]
@@ -84,11 +81,12 @@ class DepthRestorer(nn.Module):
     Args:
         config: a :class:`RestorerConfig` (defaults: the tuned frozen parameters).
         trainable: whether the parameters require grad.
-        **overrides: fields of the config to change, e.g. ``num_layers=4`` or ``use_nonlocal=False``.
+        **overrides: settings to change (:meth:`RestorerConfig.replace`), e.g. ``num_layers=4``,
+            ``terms=("nonlocal",)``, ``block_matching={"k": 10}`` or ``edge_snap=None``.
 
-    The model and its layers take their settings groups (:mod:`torch_depth_sr.config`) from the config when
-    they are built: to change a setting, build a new model (``DepthRestorer(model.config.replace(...))``)
-    and load the state dict into it.
+    The stages take their settings groups (:mod:`torch_depth_sr.config`) from the config when they are built: to
+    change a setting, build a new model (``DepthRestorer(model.config.replace(...))``) and load the state dict into
+    it. Named configurations: :meth:`from_preset`; trained models: :meth:`from_pretrained`.
 
     Examples:
         >>> from torch_depth_sr.datasets.synthetic import make_scene
@@ -102,16 +100,10 @@ class DepthRestorer(nn.Module):
     def __init__(self, config: Optional[RestorerConfig] = None, trainable: bool = False, **overrides):
         super().__init__()
         config = (config or RestorerConfig()).replace(**overrides)
-        if config.num_layers < 1:
-            raise ValueError(f"num_layers must be >= 1; got {config.num_layers}.")
         self.config = config
-        # the stages the model runs itself (x⁰, Q⁰, the first matches), each owning its settings group; the layers
-        # build theirs. ``terms`` says which terms the layers compute (whether x⁰ needs matches, Q⁰, a prior).
-        self.terms, self.fidelity_band = config.layer, config.fidelity_band
-        self.edge_snap = config.edge_snap  # the output's last step on samples with outliers (edge_snap.py)
-        self.degradation = config.upsampling.degradation  # the name of K's kind; K itself is built per forward
-        self.initializer = Initializer(config.initial, config.upsampling)
-        self.singular_detector = SingularDetector(config.singular)
+        # the singular test of x⁰ (Q⁰ and the supported pixels) when the layers run it; each layer holds its own
+        self.singular_detector = SingularDetector(config.singular) if config.uses("singular") else None
+        self.init = initial_stages(config, self.singular_detector)
         self.layers = nn.ModuleList(UnrolledLayer(config, i, trainable) for i in range(config.num_layers))
         # one block matcher, owning the temperature h (learns) and the colour weight ρ (a buffer); x⁰'s matches and
         # every scheduled layer's go through it. Built after the layers so that the parameters keep their order
@@ -119,36 +111,30 @@ class DepthRestorer(nn.Module):
         self.block_matcher = BlockMatcher(config.block_matching, trainable)
         # per-pixel multipliers of the layers' thresholds (issue 14); None = the scalar model (no state-dict keys)
         self.guidance: Optional[GuidanceNet] = None
-        if config.guidance_net:
-            self.guidance = GuidanceNet(config.num_layers, config.guidance_channels,
-                                        config.guidance_range).requires_grad_(trainable)
+        if config.guidance is not None:
+            self.guidance = GuidanceNet(config.num_layers, config.guidance.channels,
+                                        config.guidance.range).requires_grad_(trainable)
         # the learned, clamped correction at depth edges, for the task it was trained for (issue 14); None = no
-        # state-dict keys
+        # state-dict keys. Its step in ``post`` holds it; the parameters keep the key ``refiner.*``.
         self.refiner: Optional[EdgeRefiner] = None
-        self.refine_settings = config.refiner
-        if self.refine_settings.net:
-            self.refiner = EdgeRefiner(config.refine_channels, config.refine_layers).requires_grad_(trainable)
+        if config.refiner is not None:
+            self.refiner = EdgeRefiner(config.refiner.channels, config.refiner.layers).requires_grad_(trainable)
+        self.post = post_steps(config, self.refiner)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 
     @classmethod
-    def ablation(cls, name: str, **overrides) -> "DepthRestorer":
-        """``'tv'``, ``'tv+nl'``, ``'full'`` (the defaults) or ``'paper'`` (the paper's model without the library's
-        extensions, :data:`~torch_depth_sr.config.ABLATIONS`): the same model with terms switched off."""
-        if name not in ABLATIONS:
-            raise ValueError(f"unknown ablation {name!r}; allowed are {sorted(ABLATIONS)}.")
-        return cls(**{**ABLATIONS[name], **overrides})
-
-    @classmethod
-    def preset(cls, name: str, **overrides) -> "DepthRestorer":
-        """A speed preset of :data:`~torch_depth_sr.config.PRESETS` (``'fast'``), then ``overrides``.
+    def from_preset(cls, name: str, trainable: bool = False, **overrides) -> "DepthRestorer":
+        """The named configuration ``name`` (:data:`~torch_depth_sr.config.PRESETS`: ``'default'``, ``'fast'``,
+        ``'paper'``, ``'tv'``, ``'tv+nl'``), then ``overrides`` (:meth:`RestorerConfig.replace`). Trained models
+        come from :meth:`from_pretrained`.
 
         Examples:
-            >>> DepthRestorer.preset("fast").config.search_window
+            >>> DepthRestorer.from_preset("fast").config.block_matching.search_window
             11
+            >>> DepthRestorer.from_preset("paper").config.value_prior is None
+            True
         """
-        if name not in PRESETS:
-            raise ValueError(f"unknown preset {name!r}; allowed are {sorted(PRESETS)}.")
-        return cls(**{**PRESETS[name], **overrides})
+        return cls(preset_config(name, **overrides), trainable=trainable)
 
     def forward(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None, mask: Optional[torch.Tensor] = None,
                 noise_sigma: NoiseSigma = None, scale_factor: Optional[int] = None, fill: str = "all") -> torch.Tensor:
@@ -215,79 +201,45 @@ class DepthRestorer(nn.Module):
         ``fill="trusted"`` leaves a hole missing). ``integer_input``: the values were integers (uint16 millimetres,
         say), so their grid step is at least 1.
         """
-        dtype = y.dtype
         dev = self.block_matcher.log_temperature.device  # compute where the model lives; callers move the result back
         y, observed = y.to(dev), observed.to(dev)
-        b, _, h, w = y.shape
-        guide = None if rgb is None else parse_rgb(rgb, b, y.device, dtype)
+        guide = None if rgb is None else parse_rgb(rgb, y.shape[0], y.device, y.dtype)
+        K = degradation_operator(self.config.degradation, self._factor(y, guide, scale_factor))
+        obs = observe(y, observed, guide, K, noise_sigma, integer_input, self.block_matcher, timed)
+        grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
+        t0 = _clock(timed, y.device)
+        with torch.set_grad_enabled(grad_needed):
+            initial = self.init[obs.task](obs)
+            obs = replace(obs, prior=initial.prior, supported=initial.supported,
+                          guidance=None if self.guidance is None else self.guidance.prepare(guide, like=initial.state.x))
+            state = initial.state
+            for layer in self.layers:
+                state = layer(state, obs)
+            x = state.x
+            for step in self.post[obs.task]:
+                x = step(x, state, obs, initial)
+        if timed:
+            obs.log.timings["total"] = _clock(timed, x.device) - t0
+        x = obs.denormalise(x)
+        if fill == "trusted":
+            x = _leave_unconfident_missing(x, initial.fill_confident, obs)
+        info = {"noise_sigma": obs.sigma.tolist(), "scale": obs.scale.tolist(), "offset": obs.offset.tolist(),
+                "implausible_pixels": obs.glitches.flatten(1).sum(1).tolist(),
+                "cg_iterations": [int(n.max()) for n in obs.log.cg_iterations], "factor": K.scale,
+                "seconds": dict(obs.log.timings or {})}
+        return RestorationResult(x, state.confidence * obs.observed, state.q, state.e * obs.scale.view(-1, 1, 1, 1),
+                                 info)
+
+    def _factor(self, y: torch.Tensor, guide: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:
+        """The upsampling factor of the inputs, checked against the smallest input block matching allows."""
         factor = _infer_factor(y, guide, scale_factor)
-        K = degradation_operator(self.degradation, factor)  # the task, handed to every stage
+        h, w = y.shape[-2:]
         bs = self.block_matcher.settings.block_size
         if min(h, w) * factor < bs:
             raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); it must be at least "
                              f"{bs}x{bs}, the block size used by block matching.", actual=tuple(y.shape),
                              expected=f"output H, W >= {bs}")
-        step = quantisation_step(y, observed, integer_input=integer_input)
-        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
-        glitches = implausible(y, observed, scale)
-        if bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
-            observed = torch.where(glitches, torch.zeros_like(observed), observed)
-            step = quantisation_step(y, observed, integer_input=integer_input)
-            offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
-        o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
-        yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
-        grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
-        if timed and y.device.type == "cuda":
-            torch.cuda.synchronize(y.device)
-        t0 = time.perf_counter()
-        with torch.set_grad_enabled(grad_needed):
-            ctx = RestorationContext(y=yn, observed=observed, rgb=guide, K=K, block_matcher=self.block_matcher,
-                                     grid_step=step / scale, log=RunLog(timings={} if timed else None))
-            state = self.initializer(ctx, self.terms, self.singular_detector, noise=sigma / scale)
-            if self.guidance is not None:  # colour features once per forward; each layer adds its state's
-                ctx.guidance = self.guidance.prepare(guide, like=state.x)
-            for layer in self.layers:
-                state = layer(state, ctx)
-        x = state.x
-        snap = self.edge_snap
-        snapping = snap.rounds > 0 or snap.refit_radius > 0
-        if K.is_identity and guide is not None and ctx.clean is not None and snapping:
-            # before the band, which keeps every trusted measurement's promise (a flying pixel the singular test
-            # trusted moves at most the band's width towards its side)
-            with stage(ctx.log.timings, "snap", x.device):
-                x = snap_to_sides(x, guide, **snap.arguments(), active=~ctx.clean)
-                if snap.refit_radius > 0:
-                    x = refit_to_measurements(x, yn, observed, guide, **snap.refit_arguments(), active=~ctx.clean)
-        # the learned correction runs for the task it was trained for, each bounded by what was measured there
-        refining = self.refiner is not None and guide is not None and self.refine_settings.runs_for(not K.is_identity)
-        if K.is_identity:
-            trusted = state.q * observed
-            if refining:
-                with stage(ctx.log.timings, "refine", x.device):  # bounded by the trusted values around each pixel
-                    x = self.refiner(x, torch.where(trusted > 0, yn, x), guide, sigma.to(x) / scale)
-            if self.fidelity_band > 0:  # trusted measurements bound x on their own grid
-                band = noise_band(step / scale, sigma / scale, self.fidelity_band)  # in units of the scale
-                x = clamp_to_measurements(x, yn, trusted, band)
-        elif self.initializer.upsampling.output_band > 0 or refining:
-            white = sigma if noise_sigma is not None else white_noise_sigma(y, observed)
-            if self.initializer.upsampling.output_band > 0:  # do no harm on clean input
-                x = hold_to_initial(x, ctx.lowres, observed, guide, K, self.initializer.upsampling, sigma / scale,
-                                    white.to(sigma) / scale)
-            if refining:
-                with stage(ctx.log.timings, "refine", x.device):  # holes of the input: what the model made of them
-                    x = self.refiner(x, torch.where(observed > 0, yn, K(x)), guide, white.to(x) / scale)
-        if timed:
-            if x.device.type == "cuda":
-                torch.cuda.synchronize(x.device)
-            ctx.log.timings["total"] = time.perf_counter() - t0
-        x = x * s4 + o4
-        if fill == "trusted":
-            x = _leave_unconfident_missing(x, ctx, observed)
-        info = {"noise_sigma": sigma.tolist(), "scale": scale.tolist(), "offset": offset.tolist(),
-                "implausible_pixels": glitches.flatten(1).sum(1).tolist(),
-                "cg_iterations": [int(n.max()) for n in ctx.log.cg_iterations], "factor": factor,
-                "seconds": dict(ctx.log.timings or {})}
-        return RestorationResult(x, state.confidence * observed, state.q, state.e * s4, info)
+        return factor
 
     # ---- parameters -------------------------------------------------------------------------
     def layer_parameters(self) -> list[dict]:
@@ -306,8 +258,9 @@ class DepthRestorer(nn.Module):
              map_location: Union[str, torch.device] = "cpu", **overrides) -> "DepthRestorer":
         """Load what :meth:`save` wrote (never unpickles arbitrary objects).
 
-        ``overrides``: :class:`RestorerConfig` fields that replace the stored ones, e.g. ``snap_rounds=0``; fields that
-        change the parameters' shapes (``num_layers``, ``guidance_net``) make the state dict fail to load.
+        ``overrides``: settings that replace the stored ones (:meth:`RestorerConfig.replace`), e.g.
+        ``edge_snap=None``; settings that change the parameters' shapes (``num_layers``, ``guidance``) make the state
+        dict fail to load. A version-1 ``config.json`` converts on load with the defaults it was written with.
 
         Raises:
             ModelFileError: the folder or a file is missing, ``config.json`` is not valid JSON or has a field
@@ -320,7 +273,7 @@ class DepthRestorer(nn.Module):
                                     "(config.json and state_dict.pt).")
         config = load_config_file(d / "config.json")
         if overrides:
-            config = RestorerConfig.from_dict({**dataclasses.asdict(config), **overrides})
+            config = config.replace(**overrides)
         model = cls(config, trainable=trainable)
         _load_state_file(model, d / "state_dict.pt", map_location)
         return model
@@ -328,10 +281,10 @@ class DepthRestorer(nn.Module):
     @classmethod
     def from_pretrained(cls, name: str, trainable: bool = False,
                         map_location: Union[str, torch.device] = "cpu", **overrides) -> "DepthRestorer":
-        """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/`` (see its README); ``overrides`` as
-        :meth:`load` (e.g. ``snap_rounds=0, snap_refit_radius=0``: without the edge steps).
+        """Load parameters shipped in ``torch_depth_sr/pretrained/<name>/``; ``overrides`` as :meth:`load` (e.g.
+        ``edge_snap=None, edge_refit=None``: without the edge steps).
 
-        Names (``torch_depth_sr/pretrained/README.md`` has each one's training command and measured effect):
+        Names (``docs/pretrained.md`` has each one's training command and measured effect):
         ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same with the
         guidance network's per-pixel thresholds), ``'denoise-refined'`` (that model plus the edge refiner; the best
         denoiser), ``'upsample'`` (guided upsampling ×4–×16 with the edge refiner, bicubic-downsampled input),
@@ -387,13 +340,20 @@ def _check_model_input(depth: Any, rgb: Any, mask: Any) -> None:
                              "(it returns the input's dtype).")
 
 
-def _leave_unconfident_missing(x: torch.Tensor, ctx: RestorationContext, observed: torch.Tensor) -> torch.Tensor:
+def _clock(timed: bool, device: torch.device) -> float:
+    """The wall clock for the forward's total time, after the device's queue when timed (0 when not timed: the
+    host must not wait for the device)."""
+    if not timed:
+        return 0.0
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return time.perf_counter()
+
+
+def _leave_unconfident_missing(x: torch.Tensor, fill_confident: torch.Tensor, obs: Observation) -> torch.Tensor:
     """``fill="trusted"``: holes whose fill is not confident become NaN (0 once written to an integer dtype)."""
-    ok = ctx.fill_confident
-    if ok is None:
-        return x
-    missing = (observed <= 0) & (ok <= 0)  # (B,1,h,w)
-    s = ctx.K.scale  # each observation pixel covers s×s output pixels
+    missing = (obs.observed <= 0) & (fill_confident <= 0)  # (B,1,h,w)
+    s = obs.K.scale  # each observation pixel covers s×s output pixels
     missing = F.interpolate(missing.to(x.dtype), scale_factor=s, mode="nearest") > 0
     return x.masked_fill(missing, float("nan"))
 

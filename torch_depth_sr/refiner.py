@@ -36,6 +36,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from .band import clamp_between
+
 __all__ = ["EdgeRefiner", "REFINER_FEATURES"]
 
 REFINER_FEATURES = 9
@@ -101,7 +103,7 @@ class EdgeRefiner(nn.Module):
                 unit: torch.Tensor) -> torch.Tensor:
         """``x`` plus the network's step (in units of ``unit``), clamped to ``[lo, hi]``."""
         step = self.body(phi.to(self.body[0].weight.dtype)).to(x.dtype) * unit
-        return torch.minimum(torch.maximum(x + step, lo), hi)
+        return clamp_between(x + step, lo, hi)
 
     def forward(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor,
                 noise: Optional[torch.Tensor] = None) -> torch.Tensor:

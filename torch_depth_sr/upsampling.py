@@ -16,7 +16,10 @@ smooth as noise.
 
 On the eleven Middlebury 2006 images of the guided-SR test set, ×4 (``python -m
 torch_depth_sr.evaluation.clean_upsampling --sets Middlebury --images 03 04 05 09 10 11 12 19 20 28 29``), the
-choices each moved the mean RMSE: see the README's clean-upsampling section for the figures.
+choices each moved the mean RMSE: see ``docs/results/`` (clean upsampling) for the figures.
+
+The filters that do not depend on the noise level (bicubic interpolation, the JBU, the edge evidence) run once per
+forward (:func:`upsampling_reference`); x⁰ and the hold bound them with their own noise levels.
 """
 from __future__ import annotations
 
@@ -25,11 +28,15 @@ from typing import Optional
 import torch
 import torch.nn.functional as F
 
-from .config import RestorerConfig, UpsamplingConfig
+from typing import NamedTuple
+
+from .band import clamp_between
+from .config import OutputHold, UpsamplingConfig
 from .guided_filters import joint_bilateral_upsample
 from .operators import Degradation, degradation_operator
 
-__all__ = ["hold_to_initial", "plane_residual", "upsample_initial"]
+__all__ = ["UpsamplingReference", "bounded_upsample", "hold_to_initial", "plane_residual", "upsample_initial",
+           "upsampling_reference"]
 
 
 def plane_residual(depth: torch.Tensor, size: int = 3) -> torch.Tensor:
@@ -63,68 +70,87 @@ def plane_residual(depth: torch.Tensor, size: int = 3) -> torch.Tensor:
     return F.pad(residual, (r, r, r, r), mode="replicate")  # border pixels: their nearest whole window
 
 
-def upsample_initial(x0_lr: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
-                     c: UpsamplingConfig | RestorerConfig, noise: Optional[torch.Tensor] = None,
-                     degradation: Optional[Degradation] = None) -> torch.Tensor:
-    """x⁰ on the grid ``factor`` times finer than ``x0_lr (B,1,h,w)`` (holes already filled), by the
-    :class:`~torch_depth_sr.config.UpsamplingConfig` ``c`` (or a whole config's ``upsampling`` group).
+class UpsamplingReference(NamedTuple):
+    """What x⁰ and the output hold are built from, computed once per forward: the filled low-resolution estimate,
+    its bicubic interpolation and joint bilateral upsampling (None when x⁰ is bicubic) on the fine grid, and the 3×3
+    maximum of its :func:`plane_residual` on the low-resolution grid (the depth-edge evidence)."""
 
-    ``c.init == "bicubic"`` (or no guide): bicubic interpolation. ``"jbu"``: joint bilateral upsampling held
-    within ``c.init_band · noise + c.init_edge_band · E`` of bicubic interpolation, where ``noise (B,)`` is the
-    noise σ in the units of ``x0_lr`` and ``E`` the :func:`plane_residual` of ``x0_lr``, its 3×3 maximum, on the
-    fine grid. The edge band is refused on the low-resolution pixels where ``K(jbu)`` is further from ``x0_lr``
-    than ``K(bicubic)`` is by more than ``c.init_consistency · noise`` (``K``: ``degradation``, default the
-    config's own, by ``factor``). Both bands 0 (or no ``noise`` with ``init_edge_band`` 0): the unbounded filter.
-    """
-    if isinstance(c, RestorerConfig):
-        c = c.upsampling
+    lowres: torch.Tensor  # (B,1,h,w)
+    bicubic: torch.Tensor  # (B,1,H,W)
+    jbu: Optional[torch.Tensor]  # (B,1,H,W)
+    evidence: torch.Tensor  # (B,1,h,w)
+
+
+def upsampling_reference(x0_lr: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
+                         c: UpsamplingConfig) -> UpsamplingReference:
+    """The :class:`UpsamplingReference` of ``x0_lr (B,1,h,w)`` (holes already filled) for a grid ``factor`` times
+    finer; the JBU (``c.init == "jbu"`` and a guide) by ``c.jbu``, every low-resolution pixel a tap (``observed``
+gives the mask's shape and dtype)."""
     bicubic = F.interpolate(x0_lr, scale_factor=factor, mode="bicubic", align_corners=False)
-    if c.init == "bicubic" or guide is None:
+    jbu = None
+    if c.init == "jbu" and guide is not None:
+        jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), radius=c.jbu.radius,
+                                       sigma_space=c.jbu.sigma_space, sigma_color=c.jbu.sigma_color,
+                                       first_order=c.jbu.first_order)
+    evidence = F.max_pool2d(plane_residual(x0_lr), 3, stride=1, padding=1)
+    return UpsamplingReference(x0_lr, bicubic, jbu, evidence)
+
+
+def bounded_upsample(ref: UpsamplingReference, K: Degradation, c: UpsamplingConfig,
+                     noise: Optional[torch.Tensor] = None) -> torch.Tensor:
+    """x⁰ on the fine grid: bicubic interpolation without a JBU; else the JBU held within ``c.init_band · noise +
+    c.init_edge_band · E`` of bicubic interpolation, ``noise (B,)`` the noise σ in the units of ``ref.lowres`` and
+    ``E`` the edge evidence on the fine grid, refused on the low-resolution pixels where ``K(jbu)`` is further from
+    the input than ``K(bicubic)`` is by more than ``c.init_consistency · noise``. Both bands 0 (or no ``noise`` with
+    ``init_edge_band`` 0): the unbounded JBU."""
+    bicubic, jbu = ref.bicubic, ref.jbu
+    if jbu is None:
         return bicubic
-    jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), radius=c.jbu.radius,
-                                   sigma_space=c.jbu.sigma_space, sigma_color=c.jbu.sigma_color,
-                                   first_order=c.jbu.first_order)
     sigma = None if noise is None else noise.to(jbu).view(-1, 1, 1, 1)
     use_noise_band = sigma is not None and c.init_band > 0
     if not use_noise_band and c.init_edge_band <= 0:
         return jbu
     band = c.init_band * sigma if use_noise_band else torch.zeros_like(jbu)
     if c.init_edge_band > 0:
-        K = degradation if degradation is not None else degradation_operator(c.degradation, factor)
-        band = band + c.init_edge_band * _edge_evidence(x0_lr, jbu, bicubic, K, factor, c.init_consistency, sigma)
-    return bicubic + torch.maximum(torch.minimum(jbu - bicubic, band), -band)
+        band = band + c.init_edge_band * _edge_evidence(ref, K, c.init_consistency, sigma)
+    return bicubic + clamp_between(jbu - bicubic, -band, band)
 
 
-def _edge_evidence(x0_lr: torch.Tensor, jbu: torch.Tensor, bicubic: torch.Tensor, K: Degradation, factor: int,
-                   consistency: float, sigma: Optional[torch.Tensor]) -> torch.Tensor:
-    """The 3×3 maximum of :func:`plane_residual` on the fine grid, 0 where ``K(jbu)`` leaves the input by more than
-    ``K(bicubic)`` does plus ``consistency · sigma`` (no check without ``sigma`` or with ``consistency`` 0)."""
-    evidence = F.max_pool2d(plane_residual(x0_lr), 3, stride=1, padding=1)
+def upsample_initial(x0_lr: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
+                     c: UpsamplingConfig, noise: Optional[torch.Tensor] = None, degradation: Optional[Degradation] = None,
+                     degradation_kind: str = "area") -> torch.Tensor:
+    """x⁰ on the grid ``factor`` times finer than ``x0_lr (B,1,h,w)``: :func:`bounded_upsample` of its
+    :func:`upsampling_reference` (``K``: ``degradation``, else a ``degradation_kind`` K by ``factor``).
+    """
+    K = degradation if degradation is not None else degradation_operator(degradation_kind, factor)
+    return bounded_upsample(upsampling_reference(x0_lr, observed, guide, factor, c), K, c, noise)
+
+
+def _edge_evidence(ref: UpsamplingReference, K: Degradation, consistency: float,
+                   sigma: Optional[torch.Tensor]) -> torch.Tensor:
+    """The edge evidence on the fine grid, 0 where ``K(jbu)`` leaves the input by more than ``K(bicubic)`` does plus
+    ``consistency · sigma`` (no check without ``sigma`` or with ``consistency`` 0)."""
+    evidence = ref.evidence
     if sigma is not None and consistency > 0:
-        moved = (K(jbu) - x0_lr).abs() > (K(bicubic) - x0_lr).abs() + consistency * sigma
+        moved = (K(ref.jbu) - ref.lowres).abs() > (K(ref.bicubic) - ref.lowres).abs() + consistency * sigma
         evidence = torch.where(moved, torch.zeros_like(evidence), evidence)
-    return F.interpolate(evidence, scale_factor=factor, mode="nearest")
+    return F.interpolate(evidence, scale_factor=K.scale, mode="nearest")
 
 
-def hold_to_initial(x: torch.Tensor, x0_lr: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor],
-                    K: Degradation, c: UpsamplingConfig | RestorerConfig, noise: torch.Tensor, white: torch.Tensor
-                    ) -> torch.Tensor:
-    """Do no harm on upsampling: the restored ``x (B,1,H,W)`` held within ``c.output_band · white +
-    c.output_edge · max(E − c.output_edge_threshold · noise, 0)`` of x⁰ rebuilt from ``x0_lr`` with the noise
-    ``white`` (:func:`upsample_initial`; ``E`` its depth-edge evidence on the fine grid).
+def hold_to_initial(x: torch.Tensor, ref: UpsamplingReference, K: Degradation, c: UpsamplingConfig,
+                    hold: OutputHold, noise: torch.Tensor, white: torch.Tensor) -> torch.Tensor:
+    """Do no harm on upsampling: the restored ``x (B,1,H,W)`` held within ``hold.band · white + hold.edge ·
+    max(E − hold.edge_threshold · noise, 0)`` of x⁰ rebuilt with the noise ``white`` (:func:`bounded_upsample`;
+    ``E`` the depth-edge evidence on the fine grid).
 
     ``noise (B,)`` is the model's noise level, ``white (B,)`` the white part of it
-    (:func:`~torch_depth_sr.noise.white_noise_sigma`), both in the units of ``x0_lr``. On a clean map whose fine
+    (:func:`~torch_depth_sr.noise.white_noise_sigma`), both in the units of ``ref.lowres``. On a clean map whose fine
     texture (Middlebury Cloth1's ripples) has second differences of the noise level, ``white`` is 0: away from
     depth edges the output is x⁰, which is bicubic interpolation there, instead of the regularised surface that took
     the texture for noise (issue 12). Under noise the band is 3σ wide and hardly binds.
     """
-    if isinstance(c, RestorerConfig):
-        c = c.upsampling
-    factor = K.scale
-    ref = upsample_initial(x0_lr, observed, guide, factor, c, noise=white, degradation=K)
-    evidence = F.interpolate(F.max_pool2d(plane_residual(x0_lr), 3, stride=1, padding=1), scale_factor=factor,
-                             mode="nearest")
+    rebuilt = bounded_upsample(ref, K, c, noise=white)
+    evidence = F.interpolate(ref.evidence, scale_factor=K.scale, mode="nearest")
     n4, w4 = noise.to(x).view(-1, 1, 1, 1), white.to(x).view(-1, 1, 1, 1)
-    band = c.output_band * w4 + c.output_edge * (evidence - c.output_edge_threshold * n4).clamp_min(0)
-    return torch.minimum(torch.maximum(x, ref - band), ref + band)
+    band = hold.band * w4 + hold.edge * (evidence - hold.edge_threshold * n4).clamp_min(0)
+    return clamp_between(x, rebuilt - band, rebuilt + band)

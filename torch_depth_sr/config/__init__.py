@@ -1,0 +1,14 @@
+"""Settings of the restoration model: :class:`RestorerConfig` (version 2, nested groups), its groups, the named
+configurations and the conversion of version-1 files. Field by field: ``docs/config.md``."""
+from .groups import (BlockMatchingConfig, CleanSamples, EdgeRefit, EdgeSnap, FidelityBand, Guidance, GuidedPrior,
+                     InitConfig, JBUConfig, LayerMultipliers, LayerWeights, OutputHold, Refiner, SidedFill,
+                     SingularConfig, SolverConfig, UpsamplingConfig, ValuePrior)
+from .presets import PRESETS, preset_config
+from .restorer import TERMS, RestorerConfig, load_config_file
+
+__all__ = [
+    "BlockMatchingConfig", "CleanSamples", "EdgeRefit", "EdgeSnap", "FidelityBand", "Guidance", "GuidedPrior",
+    "InitConfig", "JBUConfig", "LayerMultipliers", "LayerWeights", "OutputHold", "PRESETS", "Refiner",
+    "RestorerConfig", "SidedFill", "SingularConfig", "SolverConfig", "TERMS", "UpsamplingConfig", "ValuePrior",
+    "load_config_file", "preset_config",
+]

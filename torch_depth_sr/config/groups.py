@@ -1,0 +1,383 @@
+"""The settings groups of :class:`~torch_depth_sr.config.RestorerConfig`: one frozen dataclass per part of the
+model, each checked on construction. An optional group set to ``None`` in the config switches its step off.
+
+Units: depth is normalised by the estimated noise level (``noise.py``), so thresholds, bands and weights are in
+noise-σ units; the block-matching temperature is in σ² per block pixel. Why each default is what it is, with the
+measurement behind it: ``docs/model-choices/``.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Optional
+
+from ..errors import ParameterError
+from . import domains as d
+
+__all__ = [
+    "BlockMatchingConfig", "CleanSamples", "EdgeRefit", "EdgeSnap", "FidelityBand", "Group", "Guidance",
+    "GuidedPrior", "InitConfig", "JBUConfig", "LayerMultipliers", "LayerWeights", "OutputHold", "Refiner",
+    "SidedFill", "SingularConfig", "SolverConfig", "UpsamplingConfig", "ValuePrior",
+]
+
+
+class Group:
+    """A frozen settings group: ``_CHECKS`` gives each field's domain, ``_NESTED`` the fields that are groups."""
+
+    _NAME: ClassVar[str] = ""
+    _CHECKS: ClassVar[dict] = {}
+    _NESTED: ClassVar[dict] = {}
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, list):  # JSON has no tuples
+                object.__setattr__(self, f.name, v := tuple(v))
+            nested = self._NESTED.get(f.name)
+            if nested is not None and isinstance(v, dict):
+                object.__setattr__(self, f.name, nested.from_dict(v, f"{self._NAME}.{f.name}"))
+            elif nested is not None and not isinstance(v, nested):
+                raise ParameterError(f"{self._NAME}.{f.name}", v, f"a {nested.__name__} or a dict of its fields")
+            else:
+                self._CHECKS.get(f.name, _no_check)(f"{self._NAME}.{f.name}", v)
+
+    @classmethod
+    def from_dict(cls, values: Any, name: str = "") -> "Group":
+        """The group from a dict of some of its fields (the rest keep their defaults); unknown keys are refused."""
+        name = name or cls._NAME
+        known = [f.name for f in dataclasses.fields(cls)]
+        if not isinstance(values, dict) or set(values) - set(known):
+            raise ParameterError(name, values, f"a dict with some of {known}")
+        return cls(**values)
+
+    def replace(self, **changes: Any) -> "Group":
+        """A copy with ``changes``; a nested group may be given as a dict of changes."""
+        for k, v in list(changes.items()):
+            if k in self._NESTED and isinstance(v, dict):
+                changes[k] = dataclasses.replace(getattr(self, k), **v)
+        known = [f.name for f in dataclasses.fields(self)]
+        if set(changes) - set(known):
+            raise ParameterError(self._NAME, changes, f"changes of some of {known}")
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def _no_check(name: str, v: Any) -> None:
+    """Fields whose type the dataclass already fixes (none today)."""
+
+
+@dataclass(frozen=True)
+class LayerWeights(Group):
+    """Initial values of every layer's λ (TV), η (nonlocal gradient), γ (sparse outliers), μ₁, μ₂ (splitting) —
+    softplus-positive parameters when trainable — and isotropic (group) instead of anisotropic TV shrinkage."""
+
+    lam: float = 1.0
+    eta: float = 2.0
+    gamma: float = 3.0
+    mu1: float = 2.0
+    mu2: float = 0.5
+    isotropic: bool = False
+    _NAME: ClassVar[str] = "weights"
+    _CHECKS: ClassVar[dict] = {**dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2"), d.positive),
+                               "isotropic": d.boolean}
+
+
+@dataclass(frozen=True)
+class BlockMatchingConfig(Group):
+    """Block matching (:func:`~torch_depth_sr.block_matching.block_match`): block and window sizes, k matches
+    (``upsample_*`` under guided upsampling), the layers that match again (``match_layers``) and how (``"exact"``,
+    or ``"refine"``: the previous matches and a step-``rematch_lattice`` lattice of the window re-ranked), and the
+    initial colour weight ρ and temperature h."""
+
+    block_size: int = 3
+    search_window: int = 15
+    k: int = 40
+    include_self: bool = False
+    match_layers: tuple = (2, 5)
+    rematch: str = "refine"
+    rematch_lattice: int = 2
+    color_weight: float = 400.0
+    temperature: float = 0.5
+    upsample_search_window: int = 21
+    upsample_k: int = 10
+    _NAME: ClassVar[str] = "block_matching"
+    _CHECKS: ClassVar[dict] = {
+        "block_size": d.integer(1, odd=True), "search_window": d.integer(1, odd=True), "k": d.integer(1),
+        "include_self": d.boolean, "match_layers": d.int_tuple(0, "(2, 5) or ()"),
+        "rematch": d.choice("exact", "refine"), "rematch_lattice": d.integer(0), "color_weight": d.non_negative,
+        "temperature": d.positive, "upsample_search_window": d.integer(1, odd=True), "upsample_k": d.integer(1)}
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for k_name, sw_name in (("k", "search_window"), ("upsample_k", "upsample_search_window")):
+            k, sw = getattr(self, k_name), getattr(self, sw_name)
+            candidates = sw ** 2 - (0 if self.include_self else 1)
+            if k > candidates:
+                raise ParameterError(f"block_matching.{k_name}", k, f"<= {candidates}, the number of candidate "
+                                     f"blocks in a {sw}x{sw} search window (include_self={self.include_self})",
+                                     f"Use a smaller {k_name} or a larger {sw_name}.")
+
+    def window_and_k(self) -> dict:
+        """``(search_window, k)`` per task."""
+        return {"denoise": (self.search_window, self.k), "upsample": (self.upsample_search_window, self.upsample_k)}
+
+
+@dataclass(frozen=True)
+class SingularConfig(Group):
+    """The singular-pixel test (:func:`~torch_depth_sr.singular.detect_singular`: ``tau``, ``sigma_floor``,
+    ``rounds``); measured pixels with at least ``support`` measured 8-neighbours within ``support_tol`` noise σ
+    (0 = no such rule), or on a thin line of agreeing pixels (``line_support``), stay trusted; ``gate``: a sample
+    whose share of gross failures is below it keeps Q = measured and counts as clean (None = no gate)."""
+
+    tau: float = 0.5
+    sigma_floor: float = 2.5
+    rounds: int = 3
+    support: int = 3
+    support_tol: float = 2.0
+    line_support: bool = True
+    gate: Optional[float] = 0.002
+    _NAME: ClassVar[str] = "singular"
+    _CHECKS: ClassVar[dict] = {
+        "tau": d.real(0.0, 1.0), "sigma_floor": d.positive, "rounds": d.integer(1), "support": d.integer(0),
+        "support_tol": d.positive, "line_support": d.boolean, "gate": d.optional(d.real(0.0, 1.0))}
+
+
+@dataclass(frozen=True)
+class SolverConfig(Group):
+    """The x-update's preconditioned CG (:func:`~torch_depth_sr.solvers.implicit.cg_solve`): ``fixed_iters[i]``
+    iterations in layer i (the last entry repeats; no host synchronisation), or ``()`` = to ``tol`` (at most
+    ``max_iter``, also the implicit backward's limit)."""
+
+    fixed_iters: tuple = (5, 4, 3, 3, 3, 2, 2, 1)
+    tol: float = 1e-3
+    max_iter: int = 50
+    precondition: bool = True
+    implicit_backward: bool = False
+    _NAME: ClassVar[str] = "solver"
+    _CHECKS: ClassVar[dict] = {"fixed_iters": d.int_tuple(1, "(5, 3, 1), or () for a convergence test on tol"),
+                               "tol": d.positive, "max_iter": d.integer(1), "precondition": d.boolean,
+                               "implicit_backward": d.boolean}
+
+    def iterations(self, index: int) -> Optional[int]:
+        """The fixed CG iteration count of layer ``index`` (the schedule's last entry repeats); None = to ``tol``."""
+        if not self.fixed_iters:
+            return None
+        return int(self.fixed_iters[min(index, len(self.fixed_iters) - 1)])
+
+
+@dataclass(frozen=True)
+class InitConfig(Group):
+    """The initial estimate x⁰ on the observation grid (:func:`~torch_depth_sr.initial.initial_estimate`): ``fill``
+    ``"domain"`` (masked domain-transform filter, ``dt_*``), ``"jbf"`` (masked joint bilateral filter,
+    ``kernel_size``, ``sigma_*``, which the sided hole fill uses too) or ``"pushpull"`` (no colour); whether
+    measured values are kept and whether Q⁰ comes from a singular test against the guided estimate."""
+
+    fill: str = "domain"
+    keep_observed: bool = True
+    singular: bool = False
+    kernel_size: int = 11
+    sigma_space: float = 6.0
+    sigma_color: float = 0.025
+    dt_sigma_space: float = 6.0
+    dt_sigma_color: float = 0.2
+    dt_iterations: int = 1
+    _NAME: ClassVar[str] = "initial"
+    _CHECKS: ClassVar[dict] = {
+        "fill": d.choice("domain", "jbf", "pushpull"), "keep_observed": d.boolean, "singular": d.boolean,
+        "kernel_size": d.integer(1), "sigma_space": d.positive, "sigma_color": d.positive,
+        "dt_sigma_space": d.positive, "dt_sigma_color": d.positive, "dt_iterations": d.integer(1)}
+
+
+@dataclass(frozen=True)
+class SidedFill(Group):
+    """The depth-gap-aware hole fill of x⁰ (:func:`~torch_depth_sr.fill.fill_holes_sided`; ``gap`` in noise σ):
+    a hole next to a depth gap takes the values of one side; ``ambiguous="mix"``: a hole whose side is not clear
+    keeps the weighted mean of both (``"take"``: the likelier side). ``quantiles`` is passed only when given."""
+
+    gap: float = 4.0
+    min_share: float = 0.75
+    passes: int = 8
+    choice_sigma_space: Optional[float] = 1.5
+    ambiguous: str = "mix"
+    quantiles: Optional[tuple] = None
+    _NAME: ClassVar[str] = "sided_fill"
+    _CHECKS: ClassVar[dict] = {"gap": d.positive, "min_share": d.real(0.0, 1.0), "passes": d.integer(1),
+                               "choice_sigma_space": d.optional(d.positive), "ambiguous": d.choice("mix", "take")}
+
+    def fill_arguments(self) -> dict:
+        """Keyword arguments for ``fill_holes_sided`` (all but ``ambiguous``)."""
+        kw = dict(gap=self.gap, min_share=self.min_share, passes=self.passes,
+                  choice_sigma_space=self.choice_sigma_space)
+        if self.quantiles is not None:
+            kw["quantiles"] = self.quantiles
+        return kw
+
+
+@dataclass(frozen=True)
+class ValuePrior(Group):
+    """The nonlocal value prior η₃/2‖x − x̄‖² (:func:`~torch_depth_sr.nonlocal_prior.nonlocal_terms`), denoising
+    only: x̄ the value at the pixel of a plane (ridge ``ridge`` px² on its slope) fitted to the matched centres, on
+    pixels whose matched values agree (residual variance below ``var`` σ̂²) and whose centroid lies within
+    ``offset`` px; ``range``: the centres also weighed by an edge-stopping range kernel of r noise σ (None = off)."""
+
+    weight: float = 10.0
+    var: float = 0.25
+    offset: float = 6.0
+    ridge: float = 1.0
+    range: Optional[float] = 3.0
+    _NAME: ClassVar[str] = "value_prior"
+    _CHECKS: ClassVar[dict] = {"weight": d.positive, "var": d.positive, "offset": d.positive,
+                               "ridge": d.non_negative, "range": d.optional(d.positive)}
+
+
+@dataclass(frozen=True)
+class CleanSamples(Group):
+    """Other weights on samples the singular test's gate finds free of outliers, from the layer after the first
+    gated test on: η times ``eta``; the value prior's range r = ``value_range`` and weight η₃ = ``value_weight``
+    (None: as on other samples)."""
+
+    eta: float = 0.25
+    value_range: Optional[float] = 1.0
+    value_weight: Optional[float] = 30.0
+    _NAME: ClassVar[str] = "clean_samples"
+    _CHECKS: ClassVar[dict] = {"eta": d.positive, "value_range": d.optional(d.positive),
+                               "value_weight": d.optional(d.positive)}
+
+
+@dataclass(frozen=True)
+class GuidedPrior(Group):
+    """β: untrusted pixels (missing, and singular ones with ``on_singular``) pulled with weight ``weight`` to the
+    colour-guided estimate (denoising)."""
+
+    weight: float = 3.2
+    on_singular: bool = True
+    _NAME: ClassVar[str] = "guided_prior"
+    _CHECKS: ClassVar[dict] = {"weight": d.positive, "on_singular": d.boolean}
+
+
+@dataclass(frozen=True)
+class FidelityBand(Group):
+    """Do no harm (denoising): trusted measured pixels end within ``width`` · σ_excess of their measurement,
+    σ_excess the noise beyond quantisation (:mod:`torch_depth_sr.fidelity`)."""
+
+    width: float = 4.0
+    _NAME: ClassVar[str] = "fidelity"
+    _CHECKS: ClassVar[dict] = {"width": d.positive}
+
+
+@dataclass(frozen=True)
+class JBUConfig(Group):
+    """Joint bilateral upsampling of x⁰ (:func:`~torch_depth_sr.guided_filters.joint_bilateral_upsample`)."""
+
+    radius: int = 2
+    sigma_space: float = 1.0
+    sigma_color: float = 0.1
+    first_order: bool = True
+    _NAME: ClassVar[str] = "upsampling.jbu"
+    _CHECKS: ClassVar[dict] = {"radius": d.integer(0), "sigma_space": d.positive, "sigma_color": d.positive,
+                               "first_order": d.boolean}
+
+
+@dataclass(frozen=True)
+class LayerMultipliers(Group):
+    """Multipliers on the layer weights under guided upsampling (1 = unchanged)."""
+
+    lam: float = 1.0
+    eta: float = 1.0
+    gamma: float = 1.0
+    mu1: float = 3.0
+    mu2: float = 3.0
+    _NAME: ClassVar[str] = "upsampling.multipliers"
+    _CHECKS: ClassVar[dict] = dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2"), d.positive)
+
+
+@dataclass(frozen=True)
+class UpsamplingConfig(Group):
+    """Guided upsampling: x⁰ on the fine grid (``init``: ``"jbu"`` held within ``init_band`` noise σ plus
+    ``init_edge_band`` times the depth-edge evidence of bicubic interpolation, refused where ``K(jbu)`` leaves the
+    input by ``init_consistency`` σ more than bicubic does; or ``"bicubic"``) and the layer weights' policy: each
+    times its multiplier, λ divided by the factor with ``tv_per_factor``."""
+
+    init: str = "jbu"
+    init_band: float = 3.0
+    init_edge_band: float = 0.5
+    init_consistency: float = 2.0
+    tv_per_factor: bool = True
+    jbu: JBUConfig = field(default_factory=JBUConfig)
+    multipliers: LayerMultipliers = field(default_factory=LayerMultipliers)
+    _NAME: ClassVar[str] = "upsampling"
+    _CHECKS: ClassVar[dict] = {"init": d.choice("jbu", "bicubic"), "init_band": d.non_negative,
+                               "init_edge_band": d.non_negative, "init_consistency": d.non_negative,
+                               "tv_per_factor": d.boolean}
+    _NESTED: ClassVar[dict] = {"jbu": JBUConfig, "multipliers": LayerMultipliers}
+
+
+@dataclass(frozen=True)
+class OutputHold(Group):
+    """Do no harm (guided upsampling): the output held within ``band`` · n + ``edge`` · max(E − ``edge_threshold``
+    · σ̂, 0) of x⁰ rebuilt with the white-noise level n (:func:`~torch_depth_sr.upsampling.hold_to_initial`)."""
+
+    band: float = 3.0
+    edge: float = 1.0
+    edge_threshold: float = 16.0
+    _NAME: ClassVar[str] = "upsample_hold"
+    _CHECKS: ClassVar[dict] = {"band": d.positive, "edge": d.non_negative, "edge_threshold": d.non_negative}
+
+
+@dataclass(frozen=True)
+class EdgeSnap(Group):
+    """Edge snapping of the output on samples with outliers (:func:`~torch_depth_sr.edge_snap.snap_to_sides`):
+    ``rounds`` passes of "x ← the colour-weighted median of its (2 radius + 1)² window where the weight on the
+    median's side exceeds ``share``" (colour weights exp(−‖Δc‖₁/``sigma_color``), times a Gaussian of
+    ``sigma_space`` px; None = a flat window)."""
+
+    rounds: int = 1
+    radius: int = 2
+    share: float = 0.6
+    sigma_color: float = 0.235
+    sigma_space: Optional[float] = None
+    _NAME: ClassVar[str] = "edge_snap"
+    _CHECKS: ClassVar[dict] = {"rounds": d.integer(1), "radius": d.integer(1),
+                               "share": d.real(0.5, 1.0, lo_open=False, hi_open=True), "sigma_color": d.positive,
+                               "sigma_space": d.optional(d.positive)}
+
+
+@dataclass(frozen=True)
+class EdgeRefit(Group):
+    """On samples with outliers, where the 5×5 range of x exceeds ``edge`` noise σ: x ← the colour-weighted median
+    of the measurements within ``band`` σ of x in a (2 radius + 1)² window
+    (:func:`~torch_depth_sr.edge_snap.refit_to_measurements`)."""
+
+    radius: int = 5
+    band: float = 1.5
+    edge: float = 2.0
+    sigma_color: float = 0.235
+    _NAME: ClassVar[str] = "edge_refit"
+    _CHECKS: ClassVar[dict] = {"radius": d.integer(1), "band": d.positive, "edge": d.non_negative,
+                               "sigma_color": d.positive}
+
+
+@dataclass(frozen=True)
+class Guidance(Group):
+    """Per-pixel multipliers in [1/range, range] of each layer's thresholds from a small CNN
+    (:class:`~torch_depth_sr.guidance.GuidanceNet`, ``channels`` wide); zero-initialised, trained with the layers."""
+
+    channels: int = 16
+    range: float = 4.0
+    _NAME: ClassVar[str] = "guidance"
+    _CHECKS: ClassVar[dict] = {"channels": d.integer(1), "range": d.real(1.0, lo_open=False)}
+
+
+@dataclass(frozen=True)
+class Refiner(Group):
+    """The learned, clamped edge correction after the model (:class:`~torch_depth_sr.refiner.EdgeRefiner`):
+    ``channels`` wide, ``layers`` hidden convolutions, for the ``task`` it was trained for."""
+
+    channels: int = 32
+    layers: int = 6
+    task: str = "upsample"
+    _NAME: ClassVar[str] = "refiner"
+    _CHECKS: ClassVar[dict] = {"channels": d.integer(1), "layers": d.integer(0),
+                               "task": d.choice("upsample", "denoise")}

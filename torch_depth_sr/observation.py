@@ -1,0 +1,89 @@
+"""What stays fixed during one forward: the :class:`Observation` (the normalised measurement, where it was measured,
+the guide, the degradation ``K`` and the task it stands for, the noise level), built once by :func:`observe` — the
+scale policy and the one place that decides the task — and never written to afterwards. The stages that compute
+something the later ones read (the guided prior's target, the supported pixels, the guidance features) return it,
+and the model hands it on in a new observation (``dataclasses.replace``)."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any, Optional
+
+import torch
+
+from ._checks import check_noise_sigma
+from .noise import depth_scale, implausible, quantisation_step, white_noise_sigma
+from .operators import Degradation
+from .state import RunLog
+
+__all__ = ["Observation", "TASKS", "observe"]
+
+TASKS = ("denoise", "upsample")
+"""``"denoise"``: K is the identity (restoration on the observation grid); ``"upsample"``: K downsamples."""
+
+
+@dataclass(frozen=True)
+class Observation:
+    """The measurement in units of its scale and everything a forward reads but does not change."""
+
+    y: torch.Tensor  # (B,1,h,w) normalised observation (y − offset) / scale, 0 where missing
+    observed: torch.Tensor  # (B,1,h,w) {0,1}: measured and plausible
+    rgb: Optional[torch.Tensor]  # (B,3,H,W) guide on the output grid, or None
+    K: Degradation  # from the output grid (H,W) to the observation grid (h,w)
+    task: str  # "denoise" (K = I) or "upsample"
+    raw: torch.Tensor  # (B,1,h,w) the measurement in its own units
+    offset: torch.Tensor  # (B,)
+    scale: torch.Tensor  # (B,)
+    sigma: torch.Tensor  # (B,) noise σ in depth units (given, or estimated)
+    step: torch.Tensor  # (B,) quantisation step in depth units (0 = none)
+    glitches: torch.Tensor  # (B,1,h,w) bool: implausible values, taken as missing
+    sigma_given: bool  # whether the caller gave the noise level
+    block_matcher: Any  # the model's BlockMatcher (settings, h and ρ): x⁰'s matches and every scheduled layer's
+    log: RunLog  # CG iterations and stage timings of this forward
+    # returned by the stages before the layers
+    prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate untrusted pixels are pulled to (GuidedPrior)
+    supported: Optional[torch.Tensor] = None  # (B,1,h,w) bool: pixels the singular test always trusts
+    guidance: Any = None  # the guidance network with this forward's colour features, or None
+
+    @property
+    def grid_step(self) -> torch.Tensor:
+        """(B,) the quantisation step in units of the scale."""
+        return self.step / self.scale
+
+    @property
+    def noise(self) -> torch.Tensor:
+        """(B,) the noise σ in units of the scale."""
+        return self.sigma / self.scale
+
+    @cached_property
+    def white(self) -> torch.Tensor:
+        """(B,) the white part of the noise in depth units (:func:`~torch_depth_sr.noise.white_noise_sigma`; the
+        given σ when the caller gave one), computed on first use: only the upsampling post-steps read it."""
+        return self.sigma if self.sigma_given else white_noise_sigma(self.raw, self.observed)
+
+    def normalise(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.offset.view(-1, 1, 1, 1)) / self.scale.view(-1, 1, 1, 1)
+
+    def denormalise(self, x: torch.Tensor) -> torch.Tensor:
+        """``x`` from units of the scale back to depth units."""
+        return x * self.scale.view(-1, 1, 1, 1) + self.offset.view(-1, 1, 1, 1)
+
+
+def observe(y: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
+            noise_sigma: Any, integer_input: bool, block_matcher: Any, timed: bool) -> Observation:
+    """The scale policy: quantisation step, noise σ̂, offset and scale of ``y (B,1,h,w)``, implausible values
+    (glitches) taken as missing and the scale estimated again without them; the task from ``K``."""
+    b = y.shape[0]
+    step = quantisation_step(y, observed, integer_input=integer_input)
+    offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
+    glitches = implausible(y, observed, scale)
+    if bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
+        observed = torch.where(glitches, torch.zeros_like(observed), observed)
+        step = quantisation_step(y, observed, integer_input=integer_input)
+        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
+    o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
+    yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
+    return Observation(y=yn, observed=observed, rgb=guide, K=K, task="denoise" if K.is_identity else "upsample",
+                       raw=y, offset=offset, scale=scale, sigma=sigma, step=step, glitches=glitches,
+                       sigma_given=noise_sigma is not None, block_matcher=block_matcher,
+                       log=RunLog(timings={} if timed else None))
