@@ -39,21 +39,8 @@ def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[t
     ``confident`` = measured, or filled with a clear side; ``sided`` = a hole next to a depth gap filled from
     one side.
     """
-    if guide is None or c.fill == "pushpull":
-        est = fill_holes(yn, observed)
-        g = None
-    else:
-        g = area_downsample(guide, factor)  # the guide on the depth's grid (a copy when factor = 1)
-        if c.fill == "domain":
-            est = domain_transform_filter(yn, g, observed, sigma_space=c.dt_sigma_space,
-                                          sigma_color=c.dt_sigma_color, iterations=c.dt_iterations)
-        elif c.fill == "jbf":
-            kernel = min(c.kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
-            kernel -= 1 - kernel % 2
-            est = joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.sigma_space,
-                                         sigma_color=c.sigma_color)
-        else:
-            raise ValueError(f"init_fill={c.fill!r}; allowed are 'domain', 'jbf' and 'pushpull'.")
+    # the filter of the holes: by c.fill, push-pull without a colour image
+    est, g = _FILLS["pushpull" if guide is None else c.fill](yn, observed, guide, factor, c)
     confident = torch.ones_like(observed)
     one_side = torch.zeros_like(observed)
     if sided_fill is not None and not bool((observed > 0).all()):
@@ -69,6 +56,31 @@ def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[t
         confident = torch.where(hole, r.confident, confident)
         one_side = (hole & take & (r.gap > 0)).to(observed.dtype)
     return (est, confident, one_side) if return_fill else est
+
+
+def _push_pull(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
+               c: InitConfig) -> tuple[torch.Tensor, None]:
+    return fill_holes(yn, observed), None
+
+
+def _domain_transform(yn: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor, factor: int,
+                      c: InitConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    g = area_downsample(guide, factor)  # the guide on the depth's grid (a copy when factor = 1)
+    return domain_transform_filter(yn, g, observed, sigma_space=c.dt_sigma_space, sigma_color=c.dt_sigma_color,
+                                   iterations=c.dt_iterations), g
+
+
+def _joint_bilateral(yn: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor, factor: int,
+                     c: InitConfig) -> tuple[torch.Tensor, torch.Tensor]:
+    g = area_downsample(guide, factor)
+    kernel = min(c.kernel_size, 2 * min(yn.shape[-2:]) - 1)  # reflect padding needs pad < size
+    kernel -= 1 - kernel % 2
+    return joint_bilateral_filter(yn, g, observed, kernel_size=kernel, sigma_space=c.sigma_space,
+                                  sigma_color=c.sigma_color), g
+
+
+_FILLS = {"pushpull": _push_pull, "domain": _domain_transform, "jbf": _joint_bilateral}
+"""x⁰'s fill of the holes per ``InitConfig.fill``: ``(estimate, guide on the depth's grid or None)``."""
 
 
 class InitialEstimate(NamedTuple):
