@@ -123,7 +123,8 @@ class TestDepthRestorer:
 
     def test_state_dict_saved_before_the_block_matcher_owned_h_and_rho_loads(self, tmp_path, scene):
         """Saved models keep ``log_temperature``/``log_color_weight`` at the top; both load paths move them."""
-        m = DepthRestorer(num_layers=3, block_matching={**SMALL["block_matching"], "temperature": 0.7, "color_weight": 250.0})
+        m = DepthRestorer(DepthRestorer(**SMALL).config.replace(block_matching={"temperature": 0.7,
+                                                                                "color_weight": 250.0}))
         legacy = {("log_temperature" if k == "block_matcher.log_temperature" else
                    "log_color_weight" if k == "block_matcher.log_color_weight" else k): v
                   for k, v in m.state_dict().items()}

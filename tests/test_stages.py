@@ -7,43 +7,49 @@ import pytest
 import torch
 
 from torch_depth_sr import DepthRestorer
-from torch_depth_sr.initial import Initializer
+from torch_depth_sr.initial import DenoiseInit, UpsampleInit
+from torch_depth_sr.post_steps import EdgeRefitStep, EdgeSnapStep, FidelityBandStep, OutputHoldStep
 from torch_depth_sr.stages import BlockMatcher, LinearSolver, SingularDetector
-from torch_depth_sr.state import RestorationContext, RestorationState, RunLog
+from torch_depth_sr.state import RunLog
+from torch_depth_sr.terms import GuidedPriorTerm
 
-SMALL = dict(num_layers=3, search_window=9, k=4)
-
-
-def test_state_holds_the_iterates_only():
-    names = [f.name for f in dataclasses.fields(RestorationState)]
-    assert names == ["x", "z", "w", "e", "alpha", "q", "confidence", "matches"]
+SMALL = dict(num_layers=3, block_matching={"search_window": 9, "k": 4})
 
 
-def test_the_run_log_lives_in_the_context():
-    fields = {f.name: f for f in dataclasses.fields(RestorationContext)}
-    assert "log" in fields and not {"cg_iterations", "timings"} & set(fields)
-    assert [f.name for f in dataclasses.fields(RunLog)] == ["cg_iterations", "timings"]
+def test_each_forward_gets_its_own_run_log():
     a, b = RunLog(), RunLog()
     assert a.cg_iterations is not b.cg_iterations and a.timings is None  # one log per forward, untimed by default
 
 
 def test_every_stage_holds_its_group():
-    model = DepthRestorer(**SMALL, rematch="exact", singular_tau=0.4, cg_fixed_iters=(4, 2), init_fill="jbf")
+    model = DepthRestorer(num_layers=3, block_matching={"search_window": 9, "k": 4, "rematch": "exact"},
+                          singular={"tau": 0.4}, solver={"fixed_iters": (4, 2)}, initial={"fill": "jbf"})
     c = model.config
-    assert isinstance(model.initializer, Initializer)
-    assert model.initializer.settings == c.initial and model.initializer.upsampling == c.upsampling
+    assert isinstance(model.init["denoise"], DenoiseInit) and isinstance(model.init["upsample"], UpsampleInit)
+    for task in ("denoise", "upsample"):
+        assert model.init[task].settings == c.initial and model.init[task].sided_fill == c.sided_fill
+    assert model.init["upsample"].upsampling == c.upsampling
+    assert model.init["denoise"].singular is model.singular_detector  # Q⁰ and the supported pixels: the model's
     assert model.block_matcher.settings == c.block_matching and model.singular_detector.settings == c.singular
     assert isinstance(model.block_matcher, BlockMatcher)
     for layer in model.layers:
         assert not hasattr(layer, "block_matcher")  # one matcher, the model's: it owns h, shared by every layer
-        assert isinstance(layer.singular_detector, SingularDetector) and layer.singular_detector.settings == c.singular
+        detector = layer.singular_tests["denoise"]
+        assert isinstance(detector, SingularDetector) and detector.settings == c.singular
         assert isinstance(layer.linear_solver, LinearSolver) and layer.linear_solver.settings == c.solver
-        assert layer.terms == c.layer and layer.value_prior == c.value_prior and layer.upsampling == c.upsampling
+        assert [t.settings for t in layer.terms["denoise"] if isinstance(t, GuidedPriorTerm)] == [c.guided_prior]
+        reader = layer.match_readers["denoise"]
+        assert reader.value == c.value_prior and reader.clean == c.clean_samples
+        assert layer.upsampling == c.upsampling
+    post = {type(step): step for task in ("denoise", "upsample") for step in model.post[task]}
+    assert post[EdgeSnapStep].settings == c.edge_snap and post[EdgeRefitStep].settings == c.edge_refit
+    assert post[FidelityBandStep].settings == c.fidelity
+    assert post[OutputHoldStep].settings == c.upsample_hold and post[OutputHoldStep].upsampling == c.upsampling
     # the overrides reached the groups the stages hold
     assert model.block_matcher.settings.rematch == "exact"
-    assert model.layers[1].singular_detector.settings.tau == 0.4
+    assert model.layers[1].singular_tests["denoise"].settings.tau == 0.4
     assert model.layers[2].linear_solver.settings.fixed_iters == (4, 2)
-    assert model.initializer.settings.fill == "jbf"
+    assert model.init["denoise"].settings.fill == "jbf"
 
 
 def test_only_the_block_matcher_holds_state():
@@ -54,7 +60,7 @@ def test_only_the_block_matcher_holds_state():
 
 def test_the_layer_runs_the_settings_its_stage_holds(scene):
     """A stage swapped for one with other settings changes the forward: the layer reads them from the stage."""
-    model = DepthRestorer(**SMALL, cg_fixed_iters=(5,))
+    model = DepthRestorer(**SMALL, solver={"fixed_iters": (5,)})
     base = model.restore_with_details(scene["depth"], scene["rgb"]).info["cg_iterations"]
     solver = model.layers[0].linear_solver
     model.layers[0].linear_solver = LinearSolver(dataclasses.replace(solver.settings, fixed_iters=(1,)))
@@ -64,17 +70,18 @@ def test_the_layer_runs_the_settings_its_stage_holds(scene):
 
 @pytest.mark.parametrize("timed", [False, True])
 def test_stages_record_into_the_run_log(scene, timed):
-    """Each stage appends to the context's log; the stage times appear in ``info["seconds"]`` only when asked."""
+    """Each stage appends to the observation's log; the stage times appear in ``info["seconds"]`` only when asked."""
     model = DepthRestorer(**SMALL)
     calls = []
-    hooked = {"block_matcher": model.block_matcher, "singular_detector": model.layers[0].singular_detector}
+    hooked = {"block_matcher": model.block_matcher, "singular_detector": model.layers[0].singular_tests["denoise"]}
     for name, module in hooked.items():
         module.register_forward_hook(lambda mod, args, out, n=name: calls.append(n))
     info = model.restore_with_details(scene["depth"], scene["rgb"], timings=timed).info
     assert len(info["cg_iterations"]) == SMALL["num_layers"]
     assert "singular_detector" in calls
     # x⁰'s matches and those of each scheduled layer go through the model's one matcher
-    assert calls.count("block_matcher") == 1 + sum(i in model.config.match_layers for i in range(SMALL["num_layers"]))
+    scheduled = sum(i in model.config.block_matching.match_layers for i in range(SMALL["num_layers"]))
+    assert calls.count("block_matcher") == 1 + scheduled
     if timed:
         assert {"block_matching", "singular", "cg", "total"} <= set(info["seconds"])
     else:
