@@ -34,7 +34,8 @@ from torch import nn
 
 from .operators import grad
 
-__all__ = ["GuidanceMaps", "GuidanceNet", "PreparedGuidance", "STATE_FEATURES", "MAX_LOG_MULTIPLIER"]
+__all__ = ["GuidanceMaps", "GuidanceNet", "MAX_LOG_MULTIPLIER", "NoGuidance", "PreparedGuidance", "STATE_FEATURES",
+           "UnitMultipliers"]
 
 STATE_FEATURES = 5
 """Channels of the per-layer state features (see :meth:`GuidanceNet.state_features`)."""
@@ -54,6 +55,29 @@ class GuidanceMaps(NamedTuple):
     tv: torch.Tensor
     nonlocal_: torch.Tensor
     outlier: torch.Tensor
+
+    def tv_isotropic(self) -> torch.Tensor:
+        """The multiplier of the group (isotropic) TV threshold: the geometric mean of the two directions'."""
+        return self.tv.prod(1, keepdim=True).sqrt()
+
+
+class UnitMultipliers(NamedTuple):
+    """The multipliers of a model without a guidance network: every threshold times 1 (exactly)."""
+
+    tv: float = 1.0
+    nonlocal_: float = 1.0
+    outlier: float = 1.0
+
+    def tv_isotropic(self) -> float:
+        return 1.0
+
+
+class NoGuidance:
+    """What the layers ask for their thresholds' multipliers when the model has no guidance network."""
+
+    def maps(self, index: int, x: torch.Tensor, q: torch.Tensor, residual: torch.Tensor,
+             observed: torch.Tensor) -> UnitMultipliers:
+        return UnitMultipliers()
 
 
 class GuidanceNet(nn.Module):
@@ -140,9 +164,13 @@ class PreparedGuidance:
     def __init__(self, net: GuidanceNet, guide_features: torch.Tensor):
         self.net, self.guide_features = net, guide_features
 
-    def maps(self, index: int, x: torch.Tensor, q: torch.Tensor, residual: torch.Tensor) -> GuidanceMaps:
+    def maps(self, index: int, x: torch.Tensor, q: torch.Tensor, residual: torch.Tensor,
+             observed: Optional[torch.Tensor] = None) -> GuidanceMaps:
         """Layer ``index``'s :class:`GuidanceMaps` for the estimate ``x (B,1,H,W)``, the trusted set ``q`` and the
-        residual on measured pixels ``(B,1,h,w)``; the outlier map is averaged (in the log) to the ``(h,w)`` grid."""
+        residual ``(B,1,h,w)`` (times ``observed`` when given: the residual on measured pixels); the outlier map is
+        averaged (in the log) to the ``(h,w)`` grid."""
+        if observed is not None:
+            residual = residual * observed
         feats = self.net.state_features(x, q, residual)
         log_m = self.net.max_log_multiplier * torch.tanh(self.net.raw(index, self.guide_features, feats))  # (B,5,H,W)
         log_m = log_m.to(x.dtype)

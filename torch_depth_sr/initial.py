@@ -102,6 +102,9 @@ class _Initial(nn.Module):
         super().__init__()
         self.settings, self.sided_fill = settings, sided_fill
         self.matches, self.nonlocal_ = matches, nonlocal_
+        self._keep = _keep_measured if settings.keep_observed else _guided_only
+        self._match = _match if matches else _no_matches
+        self._alpha = _alpha if nonlocal_ else _no_alpha
 
     def guided(self, obs: Observation) -> tuple[torch.Tensor, torch.Tensor]:
         """The colour-guided estimate of every pixel on the observation grid and where its fill is confident, both
@@ -113,20 +116,16 @@ class _Initial(nn.Module):
     def observation_grid(self, obs: Observation, guided: torch.Tensor) -> torch.Tensor:
         """x⁰ on the observation grid: ``y`` at the measured pixels with ``settings.keep_observed``, the ``guided``
         estimate elsewhere."""
-        keep = self.settings.keep_observed and guided is not None
-        return torch.where(obs.observed > 0, obs.y, guided) if keep else guided
+        return self._keep(obs, guided)
 
     def start(self, x0: torch.Tensor, obs: Observation, q: torch.Tensor, conf: torch.Tensor,
               clean: Optional[torch.Tensor]) -> RestorationState:
         """The state at x⁰: its matches (untrusted = unmeasured pixels masked) and α⁰ when the layers need them."""
         zeros2 = x0.new_zeros(x0.shape[0], 2, *x0.shape[-2:])
-        alpha, matches = zeros2, None
-        if self.matches:
-            matches = obs.block_matcher(x0, obs, obs.observed)
-        if self.nonlocal_:
-            alpha, _, _ = nonlocal_terms(x0, grad(x0), matches)
-        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(obs.y), alpha=alpha, q=q,
-                                confidence=conf, matches=matches, clean=clean)
+        matches = self._match(x0, obs)
+        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(obs.y),
+                                alpha=self._alpha(x0, matches, zeros2), q=q, confidence=conf, matches=matches,
+                                clean=clean)
 
     def extra_repr(self) -> str:
         return f"fill={self.settings.fill!r}, sided_fill={self.sided_fill is not None}"
@@ -142,20 +141,16 @@ class DenoiseInit(_Initial):
         super().__init__(settings, sided_fill, matches=nonlocal_ or singular is not None, nonlocal_=nonlocal_)
         self.singular = singular  # the model's detector (not a copy): Q⁰ and the supported pixels
         self.guided_prior = guided_prior
+        self._supported = _no_support if singular is None else _support
+        self._tested = _tested if singular is not None and settings.singular else _measured
+        self._prior = _guided_estimate if guided_prior else _no_prior
 
     def forward(self, obs: Observation) -> InitialEstimate:
         guided, confident = self.guided(obs)  # holes at depth gaps filled from one side
-        x0 = self.observation_grid(obs, guided)
-        q, conf, clean = obs.observed, obs.observed, None
-        supported = None if self.singular is None else self.singular.supported(obs)
-        if self.singular is not None and self.settings.singular and obs.rgb is not None:
-            # Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than
-            # those of the raw input; singular pixels start from the guided value instead of y.
-            tested = replace(obs, supported=supported)
-            q, conf, clean = self.singular(tested, guided, obs.block_matcher(guided, tested, obs.observed))
-            x0 = torch.where(q > 0, obs.y, guided)
-        prior = guided if self.guided_prior and obs.rgb is not None else None
-        return InitialEstimate(self.start(x0, obs, q, conf, clean), confident, prior=prior, supported=supported)
+        supported = self._supported(self, obs)
+        x0, q, conf, clean = self._tested(self, replace(obs, supported=supported), guided)
+        return InitialEstimate(self.start(x0, obs, q, conf, clean), confident, prior=self._prior(guided),
+                               supported=supported)
 
 
 class UpsampleInit(_Initial):
@@ -177,6 +172,61 @@ class UpsampleInit(_Initial):
 
     def extra_repr(self) -> str:
         return super().extra_repr() + f", upsampling={self.upsampling.init!r}"
+
+
+# ---- what the settings choose, once, when a stage is built ------------------------------------------------
+def _keep_measured(obs: Observation, guided: torch.Tensor) -> torch.Tensor:
+    return torch.where(obs.observed > 0, obs.y, guided)
+
+
+def _guided_only(obs: Observation, guided: torch.Tensor) -> torch.Tensor:
+    return guided
+
+
+def _match(x0: torch.Tensor, obs: Observation):
+    return obs.block_matcher(x0, obs, obs.observed)
+
+
+def _no_matches(x0: torch.Tensor, obs: Observation) -> None:
+    return None
+
+
+def _alpha(x0: torch.Tensor, matches, zeros2: torch.Tensor) -> torch.Tensor:
+    return nonlocal_terms(x0, grad(x0), matches)[0]
+
+
+def _no_alpha(x0: torch.Tensor, matches, zeros2: torch.Tensor) -> torch.Tensor:
+    return zeros2
+
+
+def _support(init: DenoiseInit, obs: Observation) -> Optional[torch.Tensor]:
+    return init.singular.supported(obs)
+
+
+def _no_support(init: DenoiseInit, obs: Observation) -> None:
+    return None
+
+
+def _measured(init: DenoiseInit, obs: Observation, guided: torch.Tensor):
+    """x⁰ with the measurements kept (``keep_observed``), Q⁰ = measured, no verdict of a gate."""
+    return init.observation_grid(obs, guided), obs.observed, obs.observed, None
+
+
+def _tested(init: DenoiseInit, obs: Observation, guided: torch.Tensor):
+    """Q⁰ from the singular-pixel test against the guided estimate, whose matches are cleaner than those of the raw
+    input; singular pixels start from the guided value instead of y (with a colour image)."""
+    if obs.rgb is None:
+        return _measured(init, obs, guided)
+    q, conf, clean = init.singular(obs, guided, obs.block_matcher(guided, obs, obs.observed))
+    return torch.where(q > 0, obs.y, guided), q, conf, clean
+
+
+def _guided_estimate(guided: torch.Tensor) -> torch.Tensor:
+    return guided
+
+
+def _no_prior(guided: torch.Tensor) -> None:
+    return None
 
 
 def initial_stages(config: RestorerConfig, singular: Optional[SingularDetector]) -> nn.ModuleDict:

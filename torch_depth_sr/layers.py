@@ -19,7 +19,6 @@ its adjoint.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import NamedTuple, Optional
 
 import torch
 import torch.nn.functional as F
@@ -27,13 +26,13 @@ from torch import nn
 
 from .config import LayerMultipliers, RestorerConfig, UpsamplingConfig
 from .observation import TASKS, Observation
-from .operators import Degradation, grad
-from .stages import LinearSolver, SingularDetector
+from .operators import grad
+from .stages import LinearSolver
 from .state import RestorationState
-from .terms import (GuidedPriorTerm, LayerStep, MatchReader, NonlocalTerm, OutlierTerm, System, TVTerm,
-                    ValuePriorTerm)
+from .terms import (GuidedPriorTerm, LayerStep, MatchReader, NonlocalTerm, OutlierTerm, Rematch, SingularTest, System,
+                    TVTerm, ValuePriorTerm)
 
-__all__ = ["UnrolledLayer", "terms_for"]
+__all__ = ["UnrolledLayer", "match_steps", "terms_for"]
 
 
 def _inv_softplus(v: float) -> float:
@@ -41,42 +40,59 @@ def _inv_softplus(v: float) -> float:
     return v + torch.log(-torch.expm1(torch.tensor(-v))).item() if v < 20 else v
 
 
-class _UnitMultipliers(NamedTuple):
-    """The guidance multipliers of a model without a guidance network: every threshold times 1 (exactly)."""
-
-    tv: float = 1.0
-    nonlocal_: float = 1.0
-    outlier: float = 1.0
-
-
 def terms_for(config: RestorerConfig, task: str) -> nn.ModuleList:
-    """The terms a layer sums for ``task``, in the order of the sums."""
+    """The terms a layer sums for ``task``, in the order of the sums (the value prior and the guided prior compare
+    the estimate with the observation pixel by pixel: denoising only, the value prior only when there are matches)."""
     denoise = task == "denoise"
+    clean = _clean_samples(config, task)
     terms: list = [TVTerm(config.weights.isotropic)]
     if denoise and config.guided_prior is not None:
         terms.append(GuidedPriorTerm(config.guided_prior))
     if config.uses("nonlocal"):
-        terms.append(NonlocalTerm(config.clean_samples))
-    if denoise and config.value_prior is not None:
+        terms.append(NonlocalTerm(clean))
+    if _value_prior(config, task) is not None:
         terms.append(ValuePriorTerm())
     if config.uses("outliers"):
         terms.append(OutlierTerm())
     return nn.ModuleList(terms)
 
 
-def _match_reader(config: RestorerConfig, task: str) -> Optional[MatchReader]:
-    value = config.value_prior if task == "denoise" else None
-    if not config.uses("nonlocal") and value is None:
-        return None
-    return MatchReader(config.uses("nonlocal"), value, config.clean_samples)
+def _matched(config: RestorerConfig, task: str) -> bool:
+    """Whether x⁰ and the layers have matches: for the nonlocal term, or for the singular test (denoising)."""
+    return config.uses("nonlocal") or (task == "denoise" and config.uses("singular"))
+
+
+def _value_prior(config: RestorerConfig, task: str):
+    return config.value_prior if task == "denoise" and _matched(config, task) else None
+
+
+def _clean_samples(config: RestorerConfig, task: str):
+    """The clean-sample weights where a gated singular test gives a verdict (denoising), else None."""
+    gated = task == "denoise" and config.uses("singular") and config.singular.gate is not None
+    return config.clean_samples if gated else None
+
+
+def match_steps(config: RestorerConfig, task: str, index: int) -> nn.ModuleList:
+    """What layer ``index`` does between the split updates and the x-update, for ``task``, in order: match again
+    (when scheduled), read the matches (α, the value prior), the singular test (denoising)."""
+    steps: list = []
+    matched = _matched(config, task)
+    if matched and index in config.block_matching.match_layers:
+        steps.append(Rematch())
+    value = _value_prior(config, task)
+    if config.uses("nonlocal") or value is not None:
+        steps.append(MatchReader(config.uses("nonlocal"), value, _clean_samples(config, task)))
+    if task == "denoise" and config.uses("singular"):
+        steps.append(SingularTest(config.singular))
+    return nn.ModuleList(steps)
 
 
 class UnrolledLayer(nn.Module):
     """One iteration; owns its positive parameters λ, η, γ, μ₁, μ₂ (softplus of raw values) and, per task
-    (``"denoise"``, ``"upsample"``), its terms (``terms[task]``), the reader of the matches (``match_readers``) and the
-    singular test (``singular_tests``, denoising only), and the solver of the x-update. It matches through the model's
-    :class:`~torch_depth_sr.stages.BlockMatcher` (``obs.block_matcher``, which owns the temperature h shared by all
-    layers) when that schedules this layer."""
+    (``"denoise"``, ``"upsample"``), its terms (``terms[task]``) and the steps between the split updates and the
+    x-update (``steps[task]``: re-matching when scheduled, the read of the matches, the singular test), and the
+    solver of the x-update. It matches through the model's :class:`~torch_depth_sr.stages.BlockMatcher`
+    (``obs.block_matcher``, which owns the temperature h shared by all layers)."""
 
     names = ("lam", "eta", "gamma", "mu1", "mu2")
 
@@ -84,12 +100,11 @@ class UnrolledLayer(nn.Module):
         super().__init__()
         self.index = index
         self.upsampling: UpsamplingConfig = config.upsampling  # the weights' policy under guided upsampling
+        # λ / s^tv_exponent under guided upsampling by s (TV of an s-times finer grid grows like s)
+        self.tv_exponent = int(config.upsampling.tv_per_factor)
         self.terms = nn.ModuleDict({task: terms_for(config, task) for task in TASKS})
-        self.match_readers = nn.ModuleDict({t: r for t in TASKS if (r := _match_reader(config, t)) is not None})
-        # the singular test compares the estimate with the observation pixel by pixel: denoising only
-        self.singular_tests = nn.ModuleDict({"denoise": SingularDetector(config.singular)}
-                                            if config.uses("singular") else {})
-        self.linear_solver = LinearSolver(config.solver)
+        self.steps = nn.ModuleDict({task: match_steps(config, task, index) for task in TASKS})
+        self.linear_solver = LinearSolver(config.solver, index)
         for n in self.names:
             raw = torch.tensor(_inv_softplus(getattr(config.weights, n)), dtype=torch.float32)
             self.register_parameter("raw_" + n, nn.Parameter(raw, requires_grad=trainable))
@@ -105,48 +120,38 @@ class UnrolledLayer(nn.Module):
         multiplier, and λ divided by the factor with ``tv_per_factor`` (TV of an s-times finer grid grows like s for
         the same surface; the quadratic terms do not)."""
         weights = tuple(self.value(n).to(dtype) for n in self.names)
-        return _WEIGHT_POLICY[obs.task](self.upsampling, obs.K, weights)
+        return _WEIGHT_POLICY[obs.task](self.upsampling.multipliers, obs.K.scale ** self.tv_exponent, weights)
 
     def forward(self, s: RestorationState, obs: Observation) -> RestorationState:
         K = obs.K
         lam, eta, gamma, mu1, mu2 = self.weights(obs, s.x.dtype)
         residual = obs.y - K(s.x)  # (B,1,h,w)
-        maps = _UnitMultipliers() if obs.guidance is None else obs.guidance.maps(
-            self.index, s.x, s.q, residual * obs.observed)
         step = LayerStep(state=s, lam=lam, eta=eta, gamma=gamma, mu1=mu1, mu2=mu2, dx=grad(s.x), residual=residual,
-                         maps=maps, w=s.w, e=s.e, alpha=s.alpha)
+                         maps=obs.guidance.maps(self.index, s.x, s.q, residual, obs.observed), w=s.w, e=s.e,
+                         alpha=s.alpha, matches=s.matches, q=s.q, confidence=s.confidence, clean=s.clean)
         terms = self.terms[obs.task]
         for term in terms:
             term.split(step, obs)
-        matches = s.matches
-        if matches is not None and obs.block_matcher.scheduled(self.index):
-            matches = obs.block_matcher(s.x, obs, s.q, previous=matches)
-        if matches is not None and obs.task in self.match_readers:
-            self.match_readers[obs.task](step, matches, obs)
-        q, conf, clean = s.q, s.confidence, s.clean
-        if obs.task in self.singular_tests:
-            q, conf, clean = self.singular_tests[obs.task](obs, s.x, matches)
-        system = System(rhs=K.adjoint(q * (obs.y - step.e)), diag=None)
+        for match_step in self.steps[obs.task]:
+            match_step(step, obs)
+        system = System(rhs=K.adjoint(step.q * (obs.y - step.e)), diag=torch.zeros_like(s.x))
         for term in terms:
-            term.system(step, obs, q, system)
-        x = self.linear_solver(obs, q, system.mu, system.rhs, s.x, diag=system.diag, layer=self.index)
-        return replace(s, x=x, z=step.z, w=step.w, e=step.e, alpha=step.alpha, q=q, confidence=conf,
-                       matches=matches, clean=clean)
+            term.system(step, obs, system)
+        x = self.linear_solver(obs, step.q, system.mu, system.rhs, s.x, diag=system.diag)
+        return replace(s, x=x, z=step.z, w=step.w, e=step.e, alpha=step.alpha, q=step.q, confidence=step.confidence,
+                       matches=step.matches, clean=step.clean)
 
     def extra_repr(self) -> str:
         return f"index={self.index}, " + ", ".join(f"{k}={v:.3g}" for k, v in self.values().items())
 
 
-def _denoise_weights(c: UpsamplingConfig, K: Degradation, weights: tuple) -> tuple:
+def _denoise_weights(m: LayerMultipliers, tv_divisor: int, weights: tuple) -> tuple:
     return weights
 
 
-def _upsample_weights(c: UpsamplingConfig, K: Degradation, weights: tuple) -> tuple:
-    m: LayerMultipliers = c.multipliers
+def _upsample_weights(m: LayerMultipliers, tv_divisor: int, weights: tuple) -> tuple:
     lam, eta, gamma, mu1, mu2 = (v * float(f) for v, f in zip(weights, (m.lam, m.eta, m.gamma, m.mu1, m.mu2)))
-    if c.tv_per_factor:
-        lam = lam / K.scale
-    return lam, eta, gamma, mu1, mu2
+    return lam / tv_divisor, eta, gamma, mu1, mu2
 
 
 _WEIGHT_POLICY = {"denoise": _denoise_weights, "upsample": _upsample_weights}

@@ -29,7 +29,7 @@ from ._checks import check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import RestorerConfig, load_config_file, preset_config
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
-from .guidance import GuidanceNet
+from .guidance import GuidanceNet, NoGuidance
 from .initial import InitialEstimate, initial_stages
 from .layers import UnrolledLayer
 from .observation import Observation, observe
@@ -211,7 +211,7 @@ class DepthRestorer(nn.Module):
         with torch.set_grad_enabled(grad_needed):
             initial = self.init[obs.task](obs)
             obs = replace(obs, prior=initial.prior, supported=initial.supported,
-                          guidance=None if self.guidance is None else self.guidance.prepare(guide, like=initial.state.x))
+                          guidance=self._guidance(guide, initial.state.x))
             state = initial.state
             for layer in self.layers:
                 state = layer(state, obs)
@@ -229,6 +229,12 @@ class DepthRestorer(nn.Module):
                 "seconds": dict(obs.log.timings or {})}
         return RestorationResult(x, state.confidence * obs.observed, state.q, state.e * obs.scale.view(-1, 1, 1, 1),
                                  info)
+
+    def _guidance(self, guide: Optional[torch.Tensor], like: torch.Tensor) -> Any:
+        """The guidance network with this forward's colour features, or unit multipliers without a network."""
+        if self.guidance is None:
+            return NoGuidance()
+        return self.guidance.prepare(guide, like=like)
 
     def _factor(self, y: torch.Tensor, guide: Optional[torch.Tensor], scale_factor: Optional[int]) -> int:
         """The upsampling factor of the inputs, checked against the smallest input block matching allows."""

@@ -43,7 +43,7 @@ class Observation:
     # returned by the stages before the layers
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate untrusted pixels are pulled to (GuidedPrior)
     supported: Optional[torch.Tensor] = None  # (B,1,h,w) bool: pixels the singular test always trusts
-    guidance: Any = None  # the guidance network with this forward's colour features, or None
+    guidance: Any = None  # the guidance network with this forward's colour features, or NoGuidance
 
     @property
     def grid_step(self) -> torch.Tensor:

@@ -27,7 +27,8 @@ __all__ = ["DenoiseRefineStep", "EdgeRefitStep", "EdgeSnapStep", "FidelityBandSt
 
 class EdgeSnapStep(nn.Module):
     """Flying pixels and edge blends go to their side (:func:`~torch_depth_sr.edge_snap.snap_to_sides`), on the
-    samples the singular gate found outliers in (none without a gate or a guide)."""
+    samples the singular gate found outliers in (nothing without a guide). Built only where a gated singular test
+    gives that verdict."""
 
     def __init__(self, settings: EdgeSnap):
         super().__init__()
@@ -35,7 +36,7 @@ class EdgeSnapStep(nn.Module):
 
     def forward(self, x: torch.Tensor, state: RestorationState, obs: Observation,
                 initial: InitialEstimate) -> torch.Tensor:
-        if state.clean is None or obs.rgb is None:
+        if obs.rgb is None:
             return x
         c = self.settings
         with stage(obs.log.timings, "snap", x.device):
@@ -48,7 +49,8 @@ class EdgeSnapStep(nn.Module):
 
 class EdgeRefitStep(nn.Module):
     """Values near depth edges refitted to their side's measurements
-    (:func:`~torch_depth_sr.edge_snap.refit_to_measurements`), on the samples the singular gate found outliers in."""
+    (:func:`~torch_depth_sr.edge_snap.refit_to_measurements`), on the samples the singular gate found outliers in.
+    Built only where a gated singular test gives that verdict."""
 
     def __init__(self, settings: EdgeRefit):
         super().__init__()
@@ -56,7 +58,7 @@ class EdgeRefitStep(nn.Module):
 
     def forward(self, x: torch.Tensor, state: RestorationState, obs: Observation,
                 initial: InitialEstimate) -> torch.Tensor:
-        if state.clean is None or obs.rgb is None:
+        if obs.rgb is None:
             return x
         c = self.settings
         with stage(obs.log.timings, "snap", x.device):
@@ -147,8 +149,10 @@ def post_steps(config: RestorerConfig, refiner: EdgeRefiner | None) -> nn.Module
     """The steps after the layers per task, in their order; ``refiner``: the model's edge refiner, if any."""
     kind = {"denoise": DenoiseRefineStep, "upsample": UpsampleRefineStep}
     refine = {} if refiner is None else {config.refiner.task: kind[config.refiner.task](refiner)}
-    denoise = [EdgeSnapStep(config.edge_snap) if config.edge_snap else None,
-               EdgeRefitStep(config.edge_refit) if config.edge_refit else None,
+    # the edge steps act on the samples a gated singular test found outliers in: without such a test, on none
+    gated = config.uses("singular") and config.singular.gate is not None
+    denoise = [EdgeSnapStep(config.edge_snap) if config.edge_snap and gated else None,
+               EdgeRefitStep(config.edge_refit) if config.edge_refit and gated else None,
                refine.get("denoise"),
                FidelityBandStep(config.fidelity) if config.fidelity else None]
     upsample = [OutputHoldStep(config.upsample_hold, config.upsampling) if config.upsample_hold else None,

@@ -5,8 +5,9 @@ A layer works in three phases, and a term takes part in those it needs:
 1. :meth:`Term.split` updates the term's split variable from the current estimate: TV :math:`z =
    \operatorname{soft}(Dx, \lambda/\mu_1)`, nonlocal :math:`w = \operatorname{soft}(Dx-\alpha, \eta/\mu_2)`,
    outliers :math:`e = Q\odot\operatorname{soft}(y-Kx, \gamma)`;
-2. the matches are read once (:class:`MatchReader`): the nonlocal gradient :math:`\alpha` and the value prior's
-   weights and target :math:`(W, \bar x)`; the singular test sets :math:`Q`;
+2. the steps of the layer between the split updates and the x-update: re-matching when scheduled (:class:`Rematch`),
+   one read of the matches (:class:`MatchReader`: the nonlocal gradient :math:`\alpha` and the value prior's
+   weights and target :math:`(W, \bar x)`), the singular test that sets :math:`Q` (:class:`SingularTest`);
 3. :meth:`Term.system` adds the term's share of the x-update's linear system
    :math:`(K^\top QK + \textstyle\sum \mathrm{diag} + \mu D^\top D)\,x = K^\top Q(y-e) + \sum \mathrm{rhs}`.
 
@@ -26,16 +27,19 @@ from .nonlocal_prior import nonlocal_terms
 from .observation import Observation
 from .operators import grad_adjoint
 from .shrinkage import group_soft_threshold, soft_threshold
+from .config import SingularConfig
+from .stages import SingularDetector
 from .state import RestorationState, stage
 
-__all__ = ["GuidedPriorTerm", "LayerStep", "MatchReader", "NonlocalTerm", "OutlierTerm", "System", "TVTerm",
-           "Term", "ValuePriorTerm"]
+__all__ = ["GuidedPriorTerm", "LayerStep", "MatchReader", "NonlocalTerm", "OutlierTerm", "Rematch", "SingularTest",
+           "System", "TVTerm", "Term", "ValuePriorTerm"]
 
 
 @dataclass
 class LayerStep:
     """One layer's working values: the weights (λ, η, γ, μ₁, μ₂ for this task), the state it started from, Dx,
-    the residual, the guidance multipliers; then the new split variables, α and the value prior's (W, x̄)."""
+    the residual, the guidance multipliers; then the new split variables, matches, α, the value prior's (W, x̄) and
+    the singular test's Q, confidence and verdict (each starts as the state's)."""
 
     state: RestorationState
     lam: torch.Tensor
@@ -52,22 +56,28 @@ class LayerStep:
     alpha: Optional[torch.Tensor] = None  # α read from this layer's matches
     value_weight: Optional[torch.Tensor] = None  # W of the value prior
     value_target: Optional[torch.Tensor] = None  # x̄
+    matches: Optional[BlockMatches] = None
+    q: Optional[torch.Tensor] = None  # (B,1,h,w) trusted set
+    confidence: Optional[torch.Tensor] = None
+    clean: Optional[torch.Tensor] = None  # (B,1,1,1) the gate's verdict
 
 
 @dataclass
 class System:
-    """The x-update's system as the terms add to it: right-hand side, diagonal (None = 0) and μ of μDᵀD."""
+    """The x-update's system as the terms add to it: right-hand side, diagonal (from 0) and μ of μDᵀD (the TV
+    term's μ₁ first)."""
 
     rhs: torch.Tensor
-    diag: Optional[torch.Tensor]
+    diag: torch.Tensor
     mu: Optional[torch.Tensor] = None
 
-    def add(self, rhs: torch.Tensor, diag: Optional[torch.Tensor] = None, mu: Optional[torch.Tensor] = None) -> None:
+    def add(self, rhs: torch.Tensor, diag: Optional[torch.Tensor] = None) -> None:
         self.rhs = self.rhs + rhs
         if diag is not None:
-            self.diag = diag if self.diag is None else self.diag + diag
-        if mu is not None:
-            self.mu = mu if self.mu is None else self.mu + mu
+            self.diag = self.diag + diag
+
+    def add_mu(self, mu: torch.Tensor) -> None:
+        self.mu = mu if self.mu is None else self.mu + mu
 
 
 class Term(nn.Module):
@@ -76,8 +86,8 @@ class Term(nn.Module):
     def split(self, step: LayerStep, obs: Observation) -> None:
         """Phase 1: update the term's split variable in ``step``."""
 
-    def system(self, step: LayerStep, obs: Observation, q: torch.Tensor, out: System) -> None:
-        """Phase 3: add the term's share of the linear system (``q``: this layer's trusted set)."""
+    def system(self, step: LayerStep, obs: Observation, out: System) -> None:
+        """Phase 3: add the term's share of the linear system (``step.q``: this layer's trusted set)."""
 
 
 class TVTerm(Term):
@@ -91,10 +101,11 @@ class TVTerm(Term):
         self.multiplier = _geometric_mean if isotropic else _per_direction
 
     def split(self, step: LayerStep, obs: Observation) -> None:
-        step.z = self.shrink(step.dx, step.lam / step.mu1 * self.multiplier(step.maps.tv))
+        step.z = self.shrink(step.dx, step.lam / step.mu1 * self.multiplier(step.maps))
 
-    def system(self, step: LayerStep, obs: Observation, q: torch.Tensor, out: System) -> None:
-        out.add(step.mu1 * grad_adjoint(step.z), mu=step.mu1)
+    def system(self, step: LayerStep, obs: Observation, out: System) -> None:
+        out.add(step.mu1 * grad_adjoint(step.z))
+        out.add_mu(step.mu1)
 
     def extra_repr(self) -> str:
         return f"isotropic={self.isotropic}"
@@ -106,16 +117,19 @@ class NonlocalTerm(Term):
 
     def __init__(self, clean: Optional[CleanSamples]):
         super().__init__()
-        self.clean_eta = None if clean is None else clean.eta
+        self.clean = clean
+        self._eta = _eta if clean is None else _eta_on_clean_samples
 
     def split(self, step: LayerStep, obs: Observation) -> None:
-        eta, clean = step.eta, step.state.clean
-        if clean is not None and self.clean_eta is not None:  # samples without outliers: α matters less
-            eta = eta * torch.where(clean, torch.full_like(eta, self.clean_eta), torch.ones_like(eta))
+        eta = self._eta(step.eta, step.state.clean, self.clean)
         step.w = soft_threshold(step.dx - step.state.alpha, eta / step.mu2 * step.maps.nonlocal_)
 
-    def system(self, step: LayerStep, obs: Observation, q: torch.Tensor, out: System) -> None:
-        out.add(step.mu2 * grad_adjoint(step.w + step.alpha), mu=step.mu2)
+    def extra_repr(self) -> str:
+        return "" if self.clean is None else f"clean_eta={self.clean.eta:g}"
+
+    def system(self, step: LayerStep, obs: Observation, out: System) -> None:
+        out.add(step.mu2 * grad_adjoint(step.w + step.alpha))
+        out.add_mu(step.mu2)
 
 
 class OutlierTerm(Term):
@@ -132,12 +146,12 @@ class GuidedPriorTerm(Term):
     def __init__(self, settings: GuidedPrior):
         super().__init__()
         self.settings = settings
+        self._untrusted = _untrusted if settings.on_singular else _missing
 
-    def system(self, step: LayerStep, obs: Observation, q: torch.Tensor, out: System) -> None:
-        if obs.prior is None:  # no colour image: no guided estimate
+    def system(self, step: LayerStep, obs: Observation, out: System) -> None:
+        if obs.rgb is None:  # no colour image: no guided estimate
             return
-        untrusted = (1 - q) if self.settings.on_singular else (1 - obs.observed)
-        beta = self.settings.weight * untrusted
+        beta = self.settings.weight * self._untrusted(step.q, obs.observed)
         out.add(beta * obs.prior, diag=beta)
 
     def extra_repr(self) -> str:
@@ -147,52 +161,124 @@ class GuidedPriorTerm(Term):
 class ValuePriorTerm(Term):
     """η₃/2‖x − x̄‖² on pixels whose matched values agree (denoising; :class:`MatchReader` computes W and x̄)."""
 
-    def system(self, step: LayerStep, obs: Observation, q: torch.Tensor, out: System) -> None:
-        if step.value_weight is not None:
-            out.add(step.value_weight * step.value_target, diag=step.value_weight)
+    def system(self, step: LayerStep, obs: Observation, out: System) -> None:
+        out.add(step.value_weight * step.value_target, diag=step.value_weight)
 
 
 class MatchReader(nn.Module):
     """One read of the matches for the terms that need them
-    (:func:`~torch_depth_sr.nonlocal_prior.nonlocal_terms`): α for the nonlocal term, and W, x̄ for the value prior,
-    whose range σ and weight change on clean samples (``clean``)."""
+    (:func:`~torch_depth_sr.nonlocal_prior.nonlocal_terms`): α for the nonlocal term (``alpha``), and W, x̄ for the
+    value prior (``value``), whose range σ and weight change on clean samples (``clean``)."""
 
     def __init__(self, alpha: bool, value: Optional[ValuePrior], clean: Optional[CleanSamples]):
         super().__init__()
-        self.alpha, self.value = alpha, value
+        self.alpha, self.value, self.clean = alpha, value, clean
         self.gates = value or ValuePrior()  # the gates nonlocal_terms reads (no effect on α)
-        self.clean = clean
+        self.value_weight = 0.0 if value is None else value.weight
+        self._gradient = _gradient if alpha else _no_gradient
+        self._alpha = _new_alpha if alpha else _old_alpha
+        clean = clean or CleanSamples(value_range=None, value_weight=None)
+        self._range = _range_sigma(self.gates.range, clean.value_range)
+        self._weight = _weight_on_clean_samples(self.gates.weight, clean.value_weight, value is not None)
 
-    def forward(self, step: LayerStep, matches: BlockMatches, obs: Observation) -> None:
-        x, clean = step.state.x, step.state.clean
-        vp = self.gates
+    def forward(self, step: LayerStep, obs: Observation) -> None:
+        x, clean, vp = step.state.x, step.state.clean, self.gates
         with stage(obs.log.timings, "nonlocal", x.device):
             alpha, diag, target = nonlocal_terms(
-                x, step.dx if self.alpha else None, matches, value_weight=vp.weight if self.value else 0.0,
-                max_var=vp.var, max_offset=vp.offset, plane_ridge=vp.ridge, range_sigma=self._range_sigma(clean))
-        step.alpha = alpha if self.alpha else step.state.alpha
-        weight_clean = None if self.clean is None else self.clean.value_weight
-        if diag is not None and clean is not None and weight_clean is not None and weight_clean != vp.weight:
-            diag = diag * torch.where(clean, weight_clean / vp.weight, 1.0).to(diag.dtype)
-        step.value_weight, step.value_target = diag, target
-
-    def _range_sigma(self, clean: Optional[torch.Tensor]) -> Optional[float | torch.Tensor]:
-        """The value prior's range σ, per sample ``clean.value_range`` where the gate found no outliers."""
-        r = self.gates.range
-        r_clean = None if self.clean is None else self.clean.value_range
-        if r is None:
-            return None
-        if clean is None or r_clean is None:
-            return r
-        return torch.where(clean, float(r_clean), float(r))
+                x, self._gradient(step), step.matches, value_weight=self.value_weight, max_var=vp.var,
+                max_offset=vp.offset, plane_ridge=vp.ridge, range_sigma=self._range(clean))
+        step.alpha = self._alpha(alpha, step)
+        step.value_weight, step.value_target = self._weight(diag, clean), target
 
     def extra_repr(self) -> str:
-        return f"alpha={self.alpha}, value_prior={self.value is not None}"
+        return f"alpha={self.alpha}, value_prior={self.value is not None}, clean_samples={self.clean is not None}"
 
 
-def _per_direction(m: Any) -> Any:
-    return m
+class Rematch(nn.Module):
+    """Block matching again on the current estimate (a layer of ``block_matching.match_layers``)."""
+
+    def forward(self, step: LayerStep, obs: Observation) -> None:
+        step.matches = obs.block_matcher.rematch(step.state.x, obs, step.state.q, step.matches)
 
 
-def _geometric_mean(m: Any) -> Any:
-    return m.prod(1, keepdim=True).sqrt() if isinstance(m, torch.Tensor) else m
+class SingularTest(nn.Module):
+    """The singular-pixel test of the current estimate: Q, its confidence and the gate's verdict
+    (:class:`~torch_depth_sr.stages.SingularDetector`)."""
+
+    def __init__(self, settings: SingularConfig):
+        super().__init__()
+        self.detector = SingularDetector(settings)
+
+    def forward(self, step: LayerStep, obs: Observation) -> None:
+        step.q, step.confidence, step.clean = self.detector(obs, step.state.x, step.matches)
+
+
+# ---- what the settings choose, once, when a term is built -----------------------------------------------
+def _eta(eta: torch.Tensor, clean: Optional[torch.Tensor], settings: Optional[CleanSamples]) -> torch.Tensor:
+    return eta
+
+
+def _eta_on_clean_samples(eta: torch.Tensor, clean: Optional[torch.Tensor], settings: CleanSamples) -> torch.Tensor:
+    """η times ``settings.eta`` on the samples the last gated test found clean (none before the first test):
+    there α (a mean over matched blocks) blurs edges more than it helps."""
+    if clean is None:
+        return eta
+    return eta * torch.where(clean, torch.full_like(eta, settings.eta), torch.ones_like(eta))
+
+
+def _untrusted(q: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    return 1 - q
+
+
+def _missing(q: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    return 1 - observed
+
+
+def _gradient(step: LayerStep) -> torch.Tensor:
+    return step.dx
+
+
+def _no_gradient(step: LayerStep) -> None:
+    return None
+
+
+def _new_alpha(alpha: torch.Tensor, step: LayerStep) -> torch.Tensor:
+    return alpha
+
+
+def _old_alpha(alpha: Optional[torch.Tensor], step: LayerStep) -> torch.Tensor:
+    return step.state.alpha
+
+
+def _range_sigma(r: Optional[float], r_clean: Optional[float]):
+    """The value prior's range σ as a function of the gate's verdict: ``r``, per sample ``r_clean`` where the last
+    gated test found no outliers; None = no range kernel."""
+    def fixed(clean: Optional[torch.Tensor]) -> Optional[float]:
+        return r
+
+    def per_sample(clean: Optional[torch.Tensor]) -> Optional[float | torch.Tensor]:
+        return r if clean is None else torch.where(clean, float(r_clean), float(r))
+
+    return fixed if r is None or r_clean is None else per_sample
+
+
+def _weight_on_clean_samples(weight: float, weight_clean: Optional[float], value: bool):
+    """The value prior's weights W as a function of the gate's verdict: η₃ = ``weight_clean`` instead of ``weight``
+    on the samples the last gated test found clean."""
+    def same(diag: Optional[torch.Tensor], clean: Optional[torch.Tensor]) -> Optional[torch.Tensor]:
+        return diag
+
+    def per_sample(diag: torch.Tensor, clean: Optional[torch.Tensor]) -> torch.Tensor:
+        if clean is None:
+            return diag
+        return diag * torch.where(clean, weight_clean / weight, 1.0).to(diag.dtype)
+
+    return per_sample if value and weight_clean is not None and weight_clean != weight else same
+
+
+def _per_direction(maps: Any) -> Any:
+    return maps.tv
+
+
+def _geometric_mean(maps: Any) -> Any:
+    return maps.tv_isotropic()

@@ -103,16 +103,14 @@ def bounded_upsample(ref: UpsamplingReference, K: Degradation, c: UpsamplingConf
     ``E`` the edge evidence on the fine grid, refused on the low-resolution pixels where ``K(jbu)`` is further from
     the input than ``K(bicubic)`` is by more than ``c.init_consistency · noise``. Both bands 0 (or no ``noise`` with
     ``init_edge_band`` 0): the unbounded JBU."""
+    if ref.jbu is None:  # x⁰ is bicubic interpolation (by the settings, or without a colour image)
+        return ref.bicubic
     bicubic, jbu = ref.bicubic, ref.jbu
-    if jbu is None:
-        return bicubic
-    sigma = None if noise is None else noise.to(jbu).view(-1, 1, 1, 1)
-    use_noise_band = sigma is not None and c.init_band > 0
-    if not use_noise_band and c.init_edge_band <= 0:
+    if (noise is None or c.init_band <= 0) and c.init_edge_band <= 0:  # no band: the unbounded filter
         return jbu
-    band = c.init_band * sigma if use_noise_band else torch.zeros_like(jbu)
-    if c.init_edge_band > 0:
-        band = band + c.init_edge_band * _edge_evidence(ref, K, c.init_consistency, sigma)
+    sigma = None if noise is None else noise.to(jbu).view(-1, 1, 1, 1)
+    band = c.init_band * (torch.zeros_like(jbu[:, :, :1, :1]) if sigma is None else sigma)
+    band = band + c.init_edge_band * _edge_evidence(ref, K, c.init_consistency, sigma)
     return bicubic + clamp_between(jbu - bicubic, -band, band)
 
 
