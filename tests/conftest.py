@@ -1,3 +1,7 @@
+import json
+import shutil
+from pathlib import Path
+
 import pytest
 import torch
 
@@ -48,3 +52,25 @@ def device(request) -> torch.device:
 def tolerance(float_dtype) -> dict:
     """``assert_close`` tolerances for ``float_dtype`` (float32 looser than float64)."""
     return _TOLERANCES[float_dtype]
+
+
+VERSION1_CONFIGS = Path(__file__).parent / "data" / "version1"
+"""``<model>/config.json``: the version-1 files the shipped models were trained and shipped with (until 2026-12-03;
+flat, and without the fields added after they were written)."""
+
+
+@pytest.fixture
+def version1_model(tmp_path):
+    """``make(name, drop=())``: a model folder holding the shipped ``name``'s state dict and the version-1
+    ``config.json`` it shipped with, less the fields in ``drop`` (a file written before they existed)."""
+    import torch_depth_sr
+
+    def make(name: str, drop=()):
+        values = json.loads((VERSION1_CONFIGS / name / "config.json").read_text())
+        folder = tmp_path / f"v1-{name}"
+        folder.mkdir()
+        (folder / "config.json").write_text(json.dumps({k: v for k, v in values.items() if k not in drop}, indent=2))
+        shutil.copy(Path(torch_depth_sr.__file__).parent / "pretrained" / name / "state_dict.pt", folder)
+        return folder
+
+    return make

@@ -320,7 +320,7 @@ def test_tv_preset_layers_hold_the_tv_term_of_the_papers_terms_only():
     # replaces, switches the paper's terms off, not that extension): no nonlocal, outlier or value-prior term
     assert [type(t) for t in layer.terms["denoise"]] == [TVTerm, GuidedPriorTerm]
     assert [type(t) for t in DepthRestorer.from_preset("tv", guided_prior=None).layers[0].terms["denoise"]] == [TVTerm]
-    assert not layer.match_readers and not layer.singular_tests
+    assert not layer.steps["denoise"] and not layer.steps["upsample"]  # no matches read, no singular test
 
 
 def test_paper_model_runs_as_a_bench_method():
