@@ -5,9 +5,12 @@ import torch
 
 from torch_depth_sr.block_matching import BlockMatches
 from torch_depth_sr.config import RestorerConfig
-from torch_depth_sr.layers import RestorationContext, RestorationState, UnrolledLayer
+from torch_depth_sr.guidance import NoGuidance
+from torch_depth_sr.layers import UnrolledLayer
+from torch_depth_sr.observation import Observation
 from torch_depth_sr.operators import Identity
 from torch_depth_sr.stages import BlockMatcher
+from torch_depth_sr.state import RestorationState, RunLog
 
 H, W, K = 5, 6, 2
 
@@ -54,9 +57,10 @@ def _hand_step(x, y, q, alpha_old, index, weight, lam, eta, gamma, mu1, mu2, use
 @pytest.mark.parametrize("use_nonlocal,use_outliers", [(True, True), (False, True), (True, False)])
 def test_layer_is_one_hand_written_hqs_step(use_nonlocal, use_outliers):
     g = torch.Generator().manual_seed(0)
-    cfg = RestorerConfig(lam=0.3, eta=0.4, gamma=0.8, mu1=1.5, mu2=0.7, use_nonlocal=use_nonlocal,
-                         use_outliers=use_outliers, use_singular=False, nl_value_weight=0.0, match_layers=(),
-                         cg_fixed_iters=(), cg_tol=1e-12, cg_max_iter=500, eta_clean=1.0)
+    terms = tuple(t for t, on in (("nonlocal", use_nonlocal), ("outliers", use_outliers)) if on)  # no singular test
+    cfg = RestorerConfig(weights=dict(lam=0.3, eta=0.4, gamma=0.8, mu1=1.5, mu2=0.7), terms=terms, value_prior=None,
+                         block_matching={"match_layers": ()}, solver=dict(fixed_iters=(), tol=1e-12, max_iter=500),
+                         clean_samples=None)
     layer = UnrolledLayer(cfg, 0).double()
     y = torch.randn(1, 1, H, W, generator=g, dtype=torch.float64) * 2
     y[0, 0, 1, 2] += 9.0  # an outlier for e
@@ -70,9 +74,12 @@ def test_layer_is_one_hand_written_hqs_step(use_nonlocal, use_outliers):
     zeros2 = torch.zeros(1, 2, H, W, dtype=torch.float64)
     state = RestorationState(x=x, z=zeros2, w=zeros2, e=torch.zeros_like(y), alpha=alpha_old, q=q, confidence=q,
                              matches=matches)
-    ctx = RestorationContext(y=y, observed=torch.ones_like(y), rgb=None, K=Identity(),
-                             block_matcher=BlockMatcher(cfg.block_matching))
-    out = layer(state, ctx)
+    one = torch.ones(1, dtype=torch.float64)
+    obs = Observation(y=y, observed=torch.ones_like(y), rgb=None, K=Identity(), task="denoise", raw=y,
+                      offset=0 * one, scale=one, sigma=one, step=0 * one, glitches=torch.zeros_like(y).bool(),
+                      sigma_given=True, block_matcher=BlockMatcher(cfg.block_matching), log=RunLog(),
+                      guidance=NoGuidance())
+    out = layer(state, obs)
 
     p = {n: float(layer.value(n)) for n in layer.names}
     flat = lambda t: t[0].reshape(-1).numpy()  # noqa: E731  (C,H,W) -> channel-major vector like D's rows
