@@ -67,7 +67,7 @@ def version1_model(tmp_path):
 
     def make(name: str, drop=()):
         values = json.loads((VERSION1_CONFIGS / name / "config.json").read_text())
-        folder = tmp_path / f"v1-{name}"
+        folder = tmp_path / "-".join(("v1", name, *drop))
         folder.mkdir()
         (folder / "config.json").write_text(json.dumps({k: v for k, v in values.items() if k not in drop}, indent=2))
         shutil.copy(Path(torch_depth_sr.__file__).parent / "pretrained" / name / "state_dict.pt", folder)

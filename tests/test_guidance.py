@@ -1,13 +1,15 @@
 """The guidance network (issue 14 item 2): per-pixel multipliers of the layers' thresholds."""
+import json
 import math
 
 import pytest
 import torch
 
 from torch_depth_sr import DepthRestorer, ParameterError, RestorerConfig
+from torch_depth_sr.config import Guidance
 from torch_depth_sr.guidance import MAX_LOG_MULTIPLIER, GuidanceMaps, GuidanceNet
 
-SMALL = dict(num_layers=3, search_window=9, k=4)
+SMALL = dict(num_layers=3, block_matching={"search_window": 9, "k": 4})
 
 
 def _perturb(model: DepthRestorer, seed: int = 0, scale: float = 0.5) -> DepthRestorer:
@@ -61,7 +63,7 @@ class TestGuidanceNet:
 
     def test_default_range_is_the_former_constant(self):
         assert GuidanceNet(num_layers=1).max_log_multiplier == MAX_LOG_MULTIPLIER == math.log(4.0)
-        assert RestorerConfig().guidance_range == 4.0
+        assert Guidance().range == 4.0 and RestorerConfig().replace(guidance={}).guidance.range == 4.0
 
     def test_no_colour_guide_runs(self):
         net = GuidanceNet(num_layers=1, channels=4)
@@ -88,22 +90,22 @@ class TestGuidedRestorer:
         if scale_factor > 1:
             depth = torch.nn.functional.avg_pool2d(scene["gt"], scale_factor) + 0.5
         plain = DepthRestorer(**SMALL)(depth, scene["rgb"])
-        guided = DepthRestorer(guidance_net=True, **SMALL)
+        guided = DepthRestorer(guidance={}, **SMALL)
         assert guided.guidance is not None
         assert torch.equal(guided(depth, scene["rgb"]), plain)
         # trainable, the forward runs with autograd (the scalar model then differs from its frozen self by an ulp)
         plain_t = DepthRestorer(trainable=True, **SMALL)(depth, scene["rgb"]).detach()
-        trainable = DepthRestorer(guidance_net=True, trainable=True, **SMALL)
+        trainable = DepthRestorer(guidance={}, trainable=True, **SMALL)
         assert torch.equal(trainable(depth, scene["rgb"]).detach(), plain_t)
 
     def test_isotropic_untrained_is_bit_identical(self, scene):
-        plain = DepthRestorer(isotropic=True, **SMALL)(scene["depth"], scene["rgb"])
-        guided = DepthRestorer(isotropic=True, guidance_net=True, **SMALL)(scene["depth"], scene["rgb"])
+        plain = DepthRestorer(weights={"isotropic": True}, **SMALL)(scene["depth"], scene["rgb"])
+        guided = DepthRestorer(weights={"isotropic": True}, guidance={}, **SMALL)(scene["depth"], scene["rgb"])
         assert torch.equal(guided, plain)
 
     def test_trained_network_changes_the_output_and_every_weight_gets_a_gradient(self, scene):
         plain = DepthRestorer(**SMALL)(scene["depth"], scene["rgb"])
-        m = _perturb(DepthRestorer(guidance_net=True, trainable=True, guidance_channels=4, **SMALL))
+        m = _perturb(DepthRestorer(guidance={"channels": 4}, trainable=True, **SMALL))
         out = m(scene["depth"], scene["rgb"])
         assert torch.isfinite(out).all() and not torch.equal(out.detach(), plain)
         ((out - scene["gt"]) ** 2 * scene["mask"]).mean().backward()
@@ -111,61 +113,69 @@ class TestGuidedRestorer:
             assert p.grad is not None and torch.isfinite(p.grad).all() and p.grad.abs().sum() > 0, n
 
     def test_save_load_round_trip(self, scene, tmp_path):
-        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=6, **SMALL), seed=1)
+        m = _perturb(DepthRestorer(guidance={"channels": 6}, **SMALL), seed=1)
         m.save(tmp_path / "guided")
         back = DepthRestorer.load(tmp_path / "guided")
-        assert back.config.guidance_net and back.config.guidance_channels == 6
+        assert back.config.guidance is not None and back.config.guidance.channels == 6
         assert torch.equal(back(scene["depth"], scene["rgb"]), m(scene["depth"], scene["rgb"]))
         state = torch.load(tmp_path / "guided" / "state_dict.pt", weights_only=True)
         assert any(k.startswith("guidance.heads.2.") for k in state)
 
-    def test_a_model_saved_without_the_field_loads_as_the_scalar_model(self, tmp_path):
-        m = DepthRestorer(**SMALL)
-        m.save(tmp_path / "old")
-        cfg = (tmp_path / "old" / "config.json")
-        text = cfg.read_text()
-        for f in ("guidance_net", "guidance_channels"):  # a config.json written before the fields existed
-            text = "\n".join(line for line in text.splitlines() if f'"{f}"' not in line)
-        cfg.write_text(text)
-        assert DepthRestorer.load(tmp_path / "old").guidance is None
+    def test_a_version1_file_without_the_guidance_fields_loads_as_the_scalar_model(self, version1_model, tmp_path):
+        folder = version1_model("denoise")  # the shipped denoiser's version-1 file, older than the guidance network
+        assert not {"guidance_net", "guidance_channels", "guidance_range"} & set(
+            json.loads((folder / "config.json").read_text()))
+        m = DepthRestorer.load(folder)
+        assert m.config.guidance is None and m.guidance is None  # version 1's default: no network
+        assert not any(k.startswith("guidance") for k in m.state_dict())
+        m.save(tmp_path / "v2")
+        written = json.loads((tmp_path / "v2" / "config.json").read_text())
+        assert "guidance" in written and written["guidance"] is None  # saved: off, in so many words
+        assert DepthRestorer.load(tmp_path / "v2").guidance is None
 
-    def test_a_guided_model_saved_without_the_range_loads_with_4_and_the_same_output(self, scene, tmp_path):
-        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=4, **SMALL), seed=3, scale=1.0)
-        m.save(tmp_path / "old")
-        cfg = (tmp_path / "old" / "config.json")
-        cfg.write_text("\n".join(line for line in cfg.read_text().splitlines() if '"guidance_range"' not in line))
-        back = DepthRestorer.load(tmp_path / "old")
-        assert back.config.guidance_range == 4.0 and back.guidance.max_log_multiplier == math.log(4.0)
-        assert torch.equal(back(scene["depth"], scene["rgb"]), m(scene["depth"], scene["rgb"]))
-        wider = DepthRestorer(m.config.replace(guidance_range=8.0))  # the same weights, a wider range
-        wider.load_state_dict(m.state_dict())
-        assert not torch.equal(wider(scene["depth"], scene["rgb"]), m(scene["depth"], scene["rgb"]))
+    def test_a_version1_guided_file_without_the_range_loads_with_4_and_save_writes_it(self, scene, version1_model,
+                                                                                     tmp_path):
+        d, c = scene["depth"], scene["rgb"]
+        shipped = DepthRestorer.from_pretrained("denoise-guided")
+        full = DepthRestorer.load(version1_model("denoise-guided"))  # the file it shipped with: range 16
+        assert full.config == shipped.config and full.config.guidance.range == 16
+        assert torch.equal(full(d, c), shipped(d, c))
+        old = DepthRestorer.load(version1_model("denoise-guided", drop=("guidance_range",)))
+        assert old.config.guidance.range == 4.0 and old.guidance.max_log_multiplier == math.log(4.0)  # version 1's
+        assert old.config == shipped.config.replace(guidance={"range": 4.0})
+        assert not torch.equal(old(d, c), shipped(d, c))  # the same weights, another range: another model
+        old.save(tmp_path / "v2")
+        written = json.loads((tmp_path / "v2" / "config.json").read_text())
+        assert written["guidance"] == {"channels": 16, "range": 4.0}
+        back = DepthRestorer.load(tmp_path / "v2")
+        assert back.config == old.config and torch.equal(back(d, c), old(d, c))
 
     def test_range_is_saved(self, tmp_path):
-        m = DepthRestorer(guidance_net=True, guidance_channels=4, guidance_range=8.0, **SMALL)
+        m = DepthRestorer(guidance={"channels": 4, "range": 8.0}, **SMALL)
         m.save(tmp_path / "r8")
         back = DepthRestorer.load(tmp_path / "r8")
-        assert back.config.guidance_range == 8.0 and back.guidance.max_log_multiplier == math.log(8.0)
+        assert back.config.guidance.range == 8.0 and back.guidance.max_log_multiplier == math.log(8.0)
 
-    def test_config_fields_are_checked_and_belong_to_the_layer_group(self):
-        c = RestorerConfig(guidance_net=True, guidance_channels=8)
-        assert c.layer.guidance_net and c.layer.guidance_channels == 8
-        with pytest.raises(ParameterError, match="guidance_net"):
-            RestorerConfig(guidance_net=1)
-        with pytest.raises(ParameterError, match="guidance_channels"):
-            RestorerConfig(guidance_channels=0)
-        c = RestorerConfig(guidance_net=True, guidance_range=16.0)
-        assert c.layer.guidance_range == 16.0
+    def test_config_fields_are_checked_and_belong_to_the_guidance_group(self):
+        c = RestorerConfig().replace(guidance={"channels": 8})
+        assert c.guidance == Guidance(channels=8) and DepthRestorer(c).guidance is not None
+        for bad in (1, True, "on"):  # the group, a dict of its fields, or None
+            with pytest.raises(ParameterError, match="guidance"):
+                RestorerConfig(guidance=bad)
+        with pytest.raises(ParameterError, match="guidance.channels"):
+            RestorerConfig().replace(guidance={"channels": 0})
+        c = RestorerConfig().replace(guidance={"range": 16.0})
+        assert c.guidance.range == 16.0
         for bad in (0.5, 0, -4.0, math.inf, math.nan, "8", True):
-            with pytest.raises(ParameterError, match="guidance_range"):
-                RestorerConfig(guidance_range=bad)
+            with pytest.raises(ParameterError, match="guidance.range"):
+                RestorerConfig().replace(guidance={"range": bad})
 
 
 class TestShippedAndBench:
     def test_shipped_guided_model_loads_with_its_network(self):
         m = DepthRestorer.from_pretrained("denoise-guided")
-        assert m.config.guidance_net and m.guidance is not None
-        assert m.guidance.max_log_multiplier == math.log(m.config.guidance_range)
+        assert m.config.guidance is not None and m.guidance is not None
+        assert m.guidance.max_log_multiplier == math.log(m.config.guidance.range)
         assert not any(p.requires_grad for p in m.parameters())
         heads = torch.cat([p.flatten() for p in m.guidance.heads.parameters()])
         assert heads.abs().max() > 0  # trained: the maps are not all 1
@@ -175,7 +185,7 @@ class TestShippedAndBench:
         from torch_depth_sr.evaluation.bench import _parse_pretrained
         from torch_depth_sr.evaluation.methods import run_method
 
-        m = _perturb(DepthRestorer(guidance_net=True, guidance_channels=4, **SMALL), seed=2)
+        m = _perturb(DepthRestorer(guidance={"channels": 4}, **SMALL), seed=2)
         m.save(tmp_path / "candidate")
         sample = {"depth": scene["depth"][0], "rgb": scene["rgb"][0]}
         out = run_method("trained", sample, pretrained=_parse_pretrained(str(tmp_path / "candidate")))
