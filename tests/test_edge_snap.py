@@ -1,14 +1,20 @@
 """Edge snapping (torch_depth_sr/edge_snap.py): blends and flying pixels go to the side their colour names, nothing
 else moves; the model snaps only samples in which the singular test's gate found outliers."""
+import json
+from pathlib import Path
+
 import pytest
 import torch
 
+import torch_depth_sr
 from torch_depth_sr import DepthRestorer, RestorerConfig
+from torch_depth_sr.config import EdgeRefit, EdgeSnap, load_config_file
 from torch_depth_sr.datasets.synthetic import make_scene
 from torch_depth_sr.edge_snap import refit_to_measurements, sided_median, snap_to_sides
 from torch_depth_sr.errors import ParameterError
 from torch_depth_sr.evaluation import SensorDegradation
 from torch_depth_sr.metrics import evaluate
+from torch_depth_sr.post_steps import EdgeRefitStep, EdgeSnapStep
 
 
 def _step_edge(h=12, w=12, near=10.0, far=50.0):
@@ -81,12 +87,13 @@ def test_gradient_flows_through_the_selected_values():
     assert torch.isfinite(x.grad).all() and x.grad.sum() == pytest.approx(x.numel())
 
 
-@pytest.mark.parametrize("field,value", [("snap_share", 1.0), ("snap_share", 0.4), ("snap_radius", 0),
-                                         ("snap_rounds", -1), ("snap_sigma_color", 0.0),
-                                         ("snap_refit_radius", -1), ("snap_refit_band", 0.0)])
-def test_settings_out_of_range_are_refused(field, value):
-    with pytest.raises(ParameterError, match=field):
-        RestorerConfig(**{field: value})
+@pytest.mark.parametrize("group,field,value", [
+    ("edge_snap", "share", 1.0), ("edge_snap", "share", 0.4), ("edge_snap", "radius", 0), ("edge_snap", "rounds", -1),
+    ("edge_snap", "rounds", 0), ("edge_snap", "sigma_color", 0.0), ("edge_refit", "sigma_color", 0.0),
+    ("edge_refit", "radius", -1), ("edge_refit", "band", 0.0)])
+def test_settings_out_of_range_are_refused(group, field, value):
+    with pytest.raises(ParameterError, match=f"{group}.{field}"):
+        RestorerConfig().replace(**{group: {field: value}})
 
 
 def test_model_snaps_sensor_input():
@@ -94,7 +101,8 @@ def test_model_snaps_sensor_input():
     d = SensorDegradation(seed=0)({**s, "mask": torch.ones_like(s["gt"]), "name": "synthetic-3"})
     y, rgb = d["depth"].clamp_min(0)[None], s["rgb"][None]
     with torch.no_grad():
-        snapped, kept = DepthRestorer(num_layers=3)(y, rgb), DepthRestorer(num_layers=3, snap_rounds=0, snap_refit_radius=0)(y, rgb)
+        snapped = DepthRestorer(num_layers=3)(y, rgb)
+        kept = DepthRestorer(num_layers=3, edge_snap=None, edge_refit=None)(y, rgb)
     sample = {**d, "depth": y[0]}
     assert evaluate(snapped, sample)["flying_left"] < evaluate(kept, sample)["flying_left"]
 
@@ -108,7 +116,7 @@ def test_on_clean_maps_trusted_pixels_stay_and_the_rest_is_not_worse():
         s = make_scene(64, 64, seed=seed)
         clean, rgb = s["gt"][None], s["rgb"][None]
         for rounds in (0, 1):  # 0: neither snapping nor the refit; 1: the defaults
-            off = {} if rounds else {"snap_rounds": 0, "snap_refit_radius": 0}
+            off = {} if rounds else {"edge_snap": None, "edge_refit": None}
             with torch.no_grad():
                 r = DepthRestorer(num_layers=3, **off).restore_with_details(clean, rgb)
             trusted = r.trusted > 0
@@ -143,10 +151,26 @@ def test_refit_takes_the_side_measurements_near_edges_and_nothing_elsewhere():
 def test_shipped_models_can_be_loaded_without_the_edge_steps():
     from torch_depth_sr.errors import ParameterError as PE
 
-    model = DepthRestorer.from_pretrained("denoise", snap_rounds=0, snap_refit_radius=0)
-    assert model.edge_snap.rounds == 0 and model.edge_snap.refit_radius == 0
-    assert DepthRestorer.from_pretrained("denoise").edge_snap.rounds == 1  # the defaults otherwise
-    with pytest.raises(PE, match="snap_rounds"):
-        DepthRestorer.from_pretrained("denoise", snap_rounds=-1)
+    model = DepthRestorer.from_pretrained("denoise", edge_snap=None, edge_refit=None)
+    assert model.config.edge_snap is None and model.config.edge_refit is None
+    assert not [s for s in model.post["denoise"] if isinstance(s, (EdgeSnapStep, EdgeRefitStep))]
+    with pytest.raises(PE, match="edge_snap.rounds"):
+        DepthRestorer.from_pretrained("denoise", edge_snap={"rounds": -1})
     with pytest.raises(PE, match="no_such_field"):
         DepthRestorer.from_pretrained("denoise", no_such_field=1)
+
+
+def test_the_denoiser_keeps_the_edge_steps_of_its_version1_file(version1_model):
+    """The shipped denoiser's version-1 file named no edge-step setting: it converts with version 1's (snapping and
+    the refit on), and the shipped file, saved since, writes them."""
+    folder = version1_model("denoise")
+    assert not [k for k in json.loads((folder / "config.json").read_text()) if k.startswith("snap_")]
+    model = DepthRestorer.load(folder)
+    assert model.config.edge_snap == EdgeSnap(rounds=1, radius=2, share=0.6, sigma_color=0.235, sigma_space=None)
+    assert model.config.edge_refit == EdgeRefit(radius=5, band=1.5, edge=2.0, sigma_color=0.235)
+    assert [type(s) for s in model.post["denoise"]][:2] == [EdgeSnapStep, EdgeRefitStep]
+    shipped = Path(torch_depth_sr.__file__).parent / "pretrained" / "denoise" / "config.json"
+    written = json.loads(shipped.read_text())
+    assert written["edge_snap"] == model.config.edge_snap.to_dict()
+    assert written["edge_refit"] == model.config.edge_refit.to_dict()
+    assert load_config_file(shipped) == model.config
