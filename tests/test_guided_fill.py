@@ -213,28 +213,28 @@ class TestInitialEstimate:
     @pytest.mark.parametrize("init_fill", ["domain", "jbf"])
     def test_init_fill_picks_the_filter(self, scene, init_fill):
         from torch_depth_sr.guided_filters import joint_bilateral_filter
-        from torch_depth_sr.model import initial_estimate
+        from torch_depth_sr.initial import initial_estimate
 
-        c = RestorerConfig(init_fill=init_fill, extra={"sided_fill": False})
+        c = RestorerConfig().replace(initial={"fill": init_fill}, sided_fill=None).initial
         y, rgb = scene["depth"], scene["rgb"]
         observed = (y > 0).float()
-        est = initial_estimate(y, observed, rgb, 1, c)
+        est = initial_estimate(y, observed, rgb, 1, c, sided_fill=None)
         if init_fill == "domain":
-            ref = domain_transform_filter(y, rgb, observed, sigma_space=c.init_dt_sigma_space,
-                                          sigma_color=c.init_dt_sigma_color, iterations=c.init_dt_iterations)
+            ref = domain_transform_filter(y, rgb, observed, sigma_space=c.dt_sigma_space,
+                                          sigma_color=c.dt_sigma_color, iterations=c.dt_iterations)
         else:
-            ref = joint_bilateral_filter(y, rgb, observed, kernel_size=c.init_kernel_size,
-                                         sigma_space=c.init_sigma_space, sigma_color=c.init_sigma_color)
+            ref = joint_bilateral_filter(y, rgb, observed, kernel_size=c.kernel_size,
+                                         sigma_space=c.sigma_space, sigma_color=c.sigma_color)
         assert torch.equal(est, ref)
 
     def test_domain_is_the_default(self):
-        assert RestorerConfig().init_fill == "domain"
+        assert RestorerConfig().initial.fill == "domain"
 
-    @pytest.mark.parametrize("field,value", [("init_fill", "guided"), ("init_dt_sigma_space", 0.0),
-                                             ("init_dt_sigma_color", -0.1), ("init_dt_iterations", 0)])
+    @pytest.mark.parametrize("field,value", [("fill", "guided"), ("dt_sigma_space", 0.0),
+                                             ("dt_sigma_color", -0.1), ("dt_iterations", 0)])
     def test_config_refuses_bad_values(self, field, value):
-        with pytest.raises(ParameterError, match=field):
-            RestorerConfig(**{field: value})
+        with pytest.raises(ParameterError, match=f"initial.{field}"):
+            RestorerConfig().replace(initial={field: value})
 
     def test_the_model_does_not_import_the_baselines(self):
         code = ("import sys, torch\nfrom torch_depth_sr import DepthRestorer\n"
