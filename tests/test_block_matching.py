@@ -363,11 +363,11 @@ def test_model_refine_rematching_stays_close_to_exact():
     y, rgb, gt = make_inputs(64, 80, 1, seed=3)
     rmse = {}
     for mode in ("exact", "refine"):
-        out = DepthRestorer(rematch=mode)(y, rgb)
+        out = DepthRestorer(block_matching={"rematch": mode})(y, rgb)
         rmse[mode] = float((out - gt).pow(2).mean().sqrt())
     assert rmse["refine"] < float((y - gt)[y > 0].pow(2).mean().sqrt()) / 2  # it still restores
     # not worse than exact by more than 3 % (on this small input it is the better one since the plane-fit value
     # prior: 1.52 vs 1.62; matches of a cheaper search differ, and the gated prior reacts to which pixels pass)
     assert rmse["refine"] <= 1.03 * rmse["exact"], rmse
-    with pytest.raises(Exception, match="rematch"):
-        DepthRestorer(rematch="patchmatch")
+    with pytest.raises(Exception, match="block_matching.rematch"):
+        DepthRestorer(block_matching={"rematch": "patchmatch"})
