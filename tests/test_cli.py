@@ -47,15 +47,15 @@ def test_demo_writes_json_and_figure(tmp_path):
 
 
 def test_demo_fails_when_the_model_does_not_beat_its_ablation(tmp_path, monkeypatch, capsys):
-    """The demo's quality check is an error: a "full" model that returns its input makes it exit 1."""
+    """The demo's quality check is an error: a "full" (default) model that returns its input makes it exit 1."""
     import torch_depth_sr.model as model_module
 
     real = model_module.DepthRestorer
 
     class Broken:
         @staticmethod
-        def ablation(name, **kw):
-            return (lambda y, rgb: y.clone()) if name == "full" else real.ablation(name, **kw)
+        def from_preset(name, **kw):
+            return (lambda y, rgb: y.clone()) if name == "default" else real.from_preset(name, **kw)
 
     monkeypatch.setattr(model_module, "DepthRestorer", Broken)  # cmd_demo imports it when it runs
     assert main(["demo", "--out", str(tmp_path), "--height", "64", "--width", "80"]) == 1
@@ -69,12 +69,12 @@ def test_bench_config_overrides_reach_the_model_and_bad_ones_are_refused():
 
     s = make_scene(40, 40, seed=3)
     sample = {"depth": s["gt"] + 0.5 * torch.randn_like(s["gt"]), "rgb": s["rgb"]}
-    small = {"num_layers": 2, "search_window": 7, "k": 4}
+    small = {"num_layers": 2, "block_matching": {"search_window": 7, "k": 4}}
     a = run_method("full", sample, config=_parse_config(json.dumps(small)))
-    b = run_method("full", sample, config={**small, "block_size": 5})
+    b = run_method("full", sample, config={**small, "block_matching": {**small["block_matching"], "block_size": 5}})
     assert a.shape == (1, 1, 40, 40) and not torch.equal(a, b)
     from torch_depth_sr.errors import UsageError
 
-    for bad in ('{"block_sise": 5}', "[1, 2]", "{not json"):
+    for bad in ('{"block_matching": {"block_sise": 5}}', '{"block_sise": 5}', "[1, 2]", "{not json"):
         with pytest.raises(UsageError, match="--config"):
             _parse_config(bad)
