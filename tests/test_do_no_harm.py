@@ -150,7 +150,7 @@ def test_a_one_pixel_gap_at_the_image_border_is_not_turned_into_a_phantom_surfac
 
     s = make_scene(32, 32, seed=5)
     gt = s["gt"][None]
-    model = DepthRestorer(num_layers=2, search_window=7)
+    model = DepthRestorer(num_layers=2, block_matching={"search_window": 7})
     for draw in range(8):
         noisy = gt + torch.randn(gt.shape, generator=torch.Generator().manual_seed(draw))
         out = model(noisy, s["rgb"][None])

@@ -14,8 +14,8 @@ def test_layer_gradcheck(implicit):
     rgb = torch.rand(1, 3, 10, 12, generator=g, dtype=torch.float64)
     # CG to convergence: a truncated CG's result depends on the preconditioner, which is built from the detached
     # μ, so the gradient of a fixed-iteration solve (the default) is not the exact derivative of its output
-    model = DepthRestorer(trainable=True, num_layers=1, search_window=5, k=3, cg_tol=1e-13, cg_max_iter=500,
-                          cg_fixed_iters=(), implicit_backward=implicit)
+    model = DepthRestorer(trainable=True, num_layers=1, block_matching={"search_window": 5, "k": 3},
+                          solver=dict(tol=1e-13, max_iter=500, fixed_iters=(), implicit_backward=implicit))
     names = [f"layers.0.raw_{n}" for n in ("lam", "eta", "gamma", "mu1", "mu2")] + ["block_matcher.log_temperature"]
     start = tuple(dict(model.named_parameters())[n].detach().double().clone().requires_grad_() for n in names)
 

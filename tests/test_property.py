@@ -36,6 +36,9 @@ def inputs(draw):
     return depth, rgb, as_torch
 
 
+SMALL = dict(num_layers=2, block_matching={"search_window": 7, "k": 3})
+
+
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(inputs())
 def test_no_crash_and_finite(args):
@@ -44,16 +47,16 @@ def test_no_crash_and_finite(args):
         depth = torch.from_numpy(depth)
         rgb = torch.from_numpy(rgb).permute(2, 0, 1).float() / 255
     d = np.asarray(depth, dtype=np.float64)
-    block = RestorerConfig().block_size
+    block = RestorerConfig().block_matching.block_size
     if not (np.isfinite(d) & (d > 0)).any():
         with pytest.raises(InvalidDepthError, match="no measured pixel"):
-            restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)
+            restore_depth(depth, rgb, **SMALL)
         return
     if min(d.shape) < block:
         with pytest.raises(ShapeError, match=f"at least {block}x{block}"):
-            restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)
+            restore_depth(depth, rgb, **SMALL)
         return
-    out = restore_depth(depth, rgb, num_layers=2, search_window=7, k=3)  # any other error fails the test
+    out = restore_depth(depth, rgb, **SMALL)  # any other error fails the test
     arr = out.numpy() if isinstance(out, torch.Tensor) else out
     assert arr.shape == tuple(depth.shape)
     assert np.isfinite(arr.astype(np.float64)).all()
