@@ -85,13 +85,13 @@ def test_tradeoffs_timing_and_accuracy_on_tiny_inputs():
     from torch_depth_sr.datasets.synthetic import make_scene
     from torch_depth_sr.evaluation.tradeoffs import accuracy, timing
 
-    assert timing({"search_window": 7, "match_layers": [2]}, height=24, width=32, repeats=1) > 0
+    assert timing({"block_matching": {"search_window": 7, "match_layers": [2]}}, height=24, width=32, repeats=1) > 0
     s = make_scene(32, 32, seed=5)
     gt = s["gt"][None]
     noise = torch.randn(gt.shape, generator=torch.Generator().manual_seed(0))  # seeded: the test must not be flaky
     sample = {"track": "paper", "depth": gt + noise, "rgb": s["rgb"][None], "gt": gt,
               "mask": torch.ones_like(gt)}
-    res = accuracy({"num_layers": 2, "search_window": 7}, [sample])
+    res = accuracy({"num_layers": 2, "block_matching": {"search_window": 7}}, [sample])
     assert set(res) == {"paper"} and 0 < res["paper"] < 1.0  # below the input noise of 1
 
 
@@ -107,7 +107,7 @@ def test_errors_by_groups_and_matches_a_direct_computation():
     lr = torch.nn.functional.avg_pool2d(gt, 2)
     samples = [{"factor": 2, "depth": lr, "rgb": s["rgb"][None], "gt": gt, "mask": mask},
                {"factor": None, "depth": gt + 0.5, "rgb": s["rgb"][None], "gt": gt, "mask": mask}]
-    model = DepthRestorer(num_layers=2, search_window=7)
+    model = DepthRestorer(num_layers=2, block_matching={"search_window": 7})
     got = errors_by(model, samples, "factor", metric="mae")
     with torch.no_grad():
         p = model(lr, s["rgb"][None], scale_factor=2)

@@ -2,7 +2,7 @@
 import torch
 import torch.nn.functional as F
 
-from torch_depth_sr.config import RestorerConfig
+from torch_depth_sr.config import UpsamplingConfig
 from torch_depth_sr.guided_filters import joint_bilateral_upsample, limited_slopes
 from torch_depth_sr.upsampling import plane_residual, upsample_initial
 
@@ -56,15 +56,15 @@ def _edge_scene(depth_edge: int, colour_edge: int, size=(64, 64), s=4):
 
 
 def _x0(lr, rgb, **overrides):
-    """x⁰ ×4 of a nearly clean input (σ = 0.05) under the default config with ``overrides``."""
+    """x⁰ ×4 of a nearly clean input (σ = 0.05) under the default upsampling settings with ``overrides``."""
     noise = torch.tensor([0.05], dtype=torch.float64)
-    return upsample_initial(lr, torch.ones_like(lr), rgb, 4, RestorerConfig(**overrides).upsampling, noise=noise)
+    return upsample_initial(lr, torch.ones_like(lr), rgb, 4, UpsamplingConfig().replace(**overrides), noise=noise)
 
 
 def test_the_edge_band_sharpens_a_depth_edge_the_colour_confirms():
     gt, lr, rgb = _edge_scene(30, 30)
     x0 = _x0(lr, rgb)
-    no_edge_band = _x0(lr, rgb, upsample_init_edge_band=0.0)
+    no_edge_band = _x0(lr, rgb, init_edge_band=0.0)
     err = lambda v: float((v - gt).abs().mean())  # noqa: E731
     assert err(x0) < 0.7 * err(no_edge_band)
 
@@ -74,7 +74,7 @@ def test_a_colour_edge_the_data_do_not_confirm_does_not_move_the_depth_edge():
     # step there; degraded again, that no longer matches the input, so the edge band is refused
     gt, lr, rgb = _edge_scene(28, 36)
     checked = _x0(lr, rgb)
-    unchecked = _x0(lr, rgb, upsample_init_consistency=0.0)
+    unchecked = _x0(lr, rgb, init_consistency=0.0)
     bicubic = F.interpolate(lr, scale_factor=4, mode="bicubic", align_corners=False)
     err = lambda v: float((v - gt).square().mean().sqrt())  # noqa: E731
     assert err(unchecked) > err(bicubic)  # the unchecked filter does harm here ...
