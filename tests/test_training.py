@@ -17,7 +17,7 @@ from torch_depth_sr.training import CropDataset, TrainConfig, load_checkpoint, m
 from torch_depth_sr.training.cli import add_train_parser, config_from_args
 from torch_depth_sr.transforms import AddGaussianNoise, AddHoles, Compose, RestoreDepth
 
-TINY = dict(num_layers=2, search_window=7, k=4)
+TINY = dict(num_layers=2, block_matching={"search_window": 7, "k": 4})
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -174,7 +174,7 @@ def test_every_parameter_that_requires_grad_gets_a_finite_gradient(guidance_net)
     s = make_scene(40, 48, seed=2)
     g = torch.Generator().manual_seed(0)
     y = (s["gt"] + 3 * torch.randn(s["gt"].shape, generator=g)).clamp_min(1)[None]
-    model = DepthRestorer(trainable=True, num_layers=3, guidance_net=guidance_net)
+    model = DepthRestorer(trainable=True, num_layers=3, guidance={} if guidance_net else None)
     loss = (model(y, s["rgb"][None]) - s["gt"][None]).square().mean()
     loss.backward()
     trainable = {n for n, p in model.named_parameters() if p.requires_grad}
@@ -185,14 +185,14 @@ def test_every_parameter_that_requires_grad_gets_a_finite_gradient(guidance_net)
 
 
 def test_guided_training_starts_from_a_scalar_model_and_learns_the_network(tmp_path):
-    """--init of a model without a guidance network and --model '{"guidance_net": true}': the scalars are loaded,
+    """--init of a model without a guidance network and --model '{"guidance": {}}': the scalars are loaded,
     the network starts untrained (multiplies by 1) and learns at its own rate; the checkpoint resumes."""
-    scalar = DepthRestorer(**TINY, lam=0.7)
+    scalar = DepthRestorer(**TINY, weights={"lam": 0.7})
     scalar.save(tmp_path / "scalar")
     cfg = tiny_config(tmp_path / "run", steps=2, val_every=0, init=str(tmp_path / "scalar"),
-                      model={"guidance_net": True, "guidance_channels": 4}, guidance_lr=1e-2)
+                      model={"guidance": {"channels": 4}}, guidance_lr=1e-2)
     model = train(cfg)
-    assert model.config.guidance_net and model.config.lam == 0.7
+    assert model.config.guidance is not None and model.config.weights.lam == 0.7
     heads = torch.cat([p.detach().flatten() for p in model.guidance.heads.parameters()])
     assert heads.abs().max() > 0  # moved from its zero start
     _, opt_state, _ = load_checkpoint(tmp_path / "run" / "checkpoint")
