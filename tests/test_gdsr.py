@@ -191,8 +191,9 @@ def test_models_run_on_the_protocols_input():
     img = _image(64, 64)
     img.depth[:8, :8] = 0.0  # a dark corner: bicubic overshoot below 0 is missing for the model
     s = degrade(img, 4, 5.0)
-    full = make_model("full", 4, {"num_layers": 2, "match_layers": [1]})
+    full = make_model("full", 4, {"num_layers": 2, "block_matching": {"match_layers": [1]}})
     assert full.config.degradation == "bicubic" and full.config.num_layers == 2
+    assert full.config.block_matching.match_layers == (1,)
     out = _run_model(full, s, "cpu")
     assert out.shape == s["gt"].shape and torch.isfinite(out).all()
     assert make_model("trained-x4", 4) is not None  # upsample-x4 ships
@@ -211,7 +212,7 @@ def test_cli_rows(tmp_path, capsys, monkeypatch):
     out = tmp_path / "g.json"
     assert main(["bench", "--track", "gdsr", "--sets", "Middlebury", "--scenes", "30", "--scales", "16",
                  "--noise", "0", "5", "--methods", "bicubic", "full", "trained-x4", "--json", str(out),
-                 "--config", '{"num_layers": 2, "match_layers": [1]}']) == 0
+                 "--config", '{"num_layers": 2, "block_matching": {"match_layers": [1]}}']) == 0
     data = json.loads(out.read_text())
     rows = data["results"]
     assert len(rows) == 6
@@ -224,7 +225,8 @@ def test_cli_rows(tmp_path, capsys, monkeypatch):
     assert set(ok) == {("bicubic", 0.0), ("bicubic", 5.0), ("full", 0.0), ("full", 5.0)}
     assert all(0 < v < 20 for v in ok.values())
     assert {(r["subset"], r["method"]) for r in data["summary"]} >= {("all", "full"), ("heldout", "bicubic")}
-    assert data["metadata"]["full_config"] == {"degradation": "bicubic", "num_layers": 2, "match_layers": [1]}
+    assert data["metadata"]["full_config"] == {"degradation": "bicubic", "num_layers": 2,
+                                               "block_matching": {"match_layers": [1]}}
     assert "track gdsr" in capsys.readouterr().out
 
 
