@@ -52,8 +52,8 @@ def test_clean_rippled_upsampling_is_not_worse_than_bicubic():
     rgb = torch.full((1, 3, *gt.shape[-2:]), 0.5)
     rgb[..., 64:, :] = 0.8
     err = {}
-    for band in (0.0, 3.0):
-        out = restore_depth(lr, rgb, upsample_output_band=band)
+    for band in (0.0, 3.0):  # 0: no output hold (version 1's upsample_output_band=0)
+        out = restore_depth(lr, rgb, upsample_hold={"band": band} if band else None)
         err[band] = float((out - gt).square().mean().sqrt())
     ref = float((bicubic - gt).square().mean().sqrt())
     assert err[3.0] < ref and err[3.0] <= 1.01 * err[0.0], (err, ref)
