@@ -23,7 +23,7 @@ for size in args.sizes:
     y = torch.where(torch.rand(y.shape, generator=g) < 0.05, torch.zeros_like(y), y.clamp_min(1))
     rgb = s["rgb"][None]
     for precondition in (True, False):
-        model = DepthRestorer(precondition=precondition)
+        model = DepthRestorer(solver={"precondition": precondition})
         model(y, rgb)  # warm-up (compiles the C kernel on first use)
         info = model.restore_with_details(y, rgb, timings=True).info
         sec = info["seconds"]

@@ -2,7 +2,7 @@
 
 CI (seconds, synthetic scenes only, tiny model):
     python examples/train_unrolled.py --steps 2 --crop 32 --tiny
-The shipped `denoise` parameters: see torch_depth_sr/pretrained/README.md.
+The shipped `denoise` parameters: see docs/pretrained.md.
 Many processes: torchrun --nproc_per_node 2 examples/train_unrolled.py --steps 100
 """
 import argparse
@@ -22,7 +22,7 @@ def main() -> None:
     p.add_argument("--tiny", action="store_true", help="2 layers, small search window, synthetic data only")
     a = p.parse_args()
     torch.set_num_threads(1)
-    tiny = dict(num_layers=2, search_window=7, k=4) if a.tiny else {}
+    tiny = dict(num_layers=2, block_matching={"search_window": 7, "k": 4}) if a.tiny else {}
     cfg = TrainConfig(out=a.out, steps=a.steps, crop=a.crop, batch_size=a.batch_size, model=tiny,
                       use_middlebury=not a.tiny, synthetic=3 if a.tiny else 32, val_size=1 if a.tiny else 16,
                       val_every=max(1, a.steps // 4), num_workers=0 if a.tiny else 1)

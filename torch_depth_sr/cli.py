@@ -32,8 +32,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     preds["input"] = fill_holes(y, (y > 0).float())
     secs = {"input": time.perf_counter() - t0}
-    for name in ("tv", "full"):
-        model = DepthRestorer.ablation(name)
+    for name, preset in (("tv", "tv"), ("full", "default")):
+        model = DepthRestorer.from_preset(preset)
         t0 = time.perf_counter()
         preds[name] = model(y, rgb)
         secs[name] = time.perf_counter() - t0
@@ -173,7 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--per-scene", action="store_true", help="print per-scene rows")
     b.add_argument("--device", default="cpu")
     b.add_argument("--config", default=None,
-                   help='JSON of RestorerConfig overrides for tv, tv+nl, full (e.g. \'{"block_size": 5}\')')
+                   help='JSON of RestorerConfig overrides for the model methods tv, tv+nl, full, full-fast, '
+                        'paper-model (docs/config.md), e.g. \'{"block_matching": {"block_size": 5}}\', '
+                        '\'{"block_matching.block_size": 5}\' or the version-1 \'{"block_size": 5}\'')
     b.add_argument("--pretrained", default=None, metavar="FOLDER",
                    help="methods trained, trained-refined, trained-x4, trained-upsample(-area) (gdsr: trained) load "
                         "this saved model folder (e.g. runs/x/best) instead of the shipped parameters")

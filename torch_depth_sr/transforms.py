@@ -509,7 +509,12 @@ class RestoreDepth(Transform):
             input's device.
         keep_input: if a key name, the unrestored depth is kept under it (e.g. ``"raw_depth"``).
         with_confidence: also store the confidence map under ``"confidence"``.
-        **overrides: fields of :class:`~torch_depth_sr.RestorerConfig` (e.g. ``num_layers=4``).
+        config: the :class:`~torch_depth_sr.RestorerConfig` of the new restorer (default: the defaults;
+            named ones: :func:`~torch_depth_sr.config.preset_config`).
+        **overrides: top-level settings of :class:`~torch_depth_sr.RestorerConfig` to change, as
+            :class:`~torch_depth_sr.DepthRestorer` takes them (:meth:`RestorerConfig.replace
+            <torch_depth_sr.RestorerConfig.replace>`): e.g. ``num_layers=4``, ``block_matching={"k": 10}`` (a group
+            as a dict of the fields to change) or ``edge_snap=None`` (a step off); ``docs/config.md``.
     """
 
     def __init__(self, restorer: Optional[DepthRestorer] = None, pretrained: Optional[str] = None,

@@ -3,6 +3,7 @@ configurations and the conversion of version-1 files. Field by field: ``docs/con
 from .groups import (BlockMatchingConfig, CleanSamples, EdgeRefit, EdgeSnap, FidelityBand, Guidance, GuidedPrior,
                      InitConfig, JBUConfig, LayerMultipliers, LayerWeights, OutputHold, Refiner, SidedFill,
                      SingularConfig, SolverConfig, UpsamplingConfig, ValuePrior)
+from .overrides import apply_overrides
 from .presets import PRESETS, preset_config
 from .restorer import TERMS, RestorerConfig, load_config_file
 
@@ -10,5 +11,5 @@ __all__ = [
     "BlockMatchingConfig", "CleanSamples", "EdgeRefit", "EdgeSnap", "FidelityBand", "Guidance", "GuidedPrior",
     "InitConfig", "JBUConfig", "LayerMultipliers", "LayerWeights", "OutputHold", "PRESETS", "Refiner",
     "RestorerConfig", "SidedFill", "SingularConfig", "SolverConfig", "TERMS", "UpsamplingConfig", "ValuePrior",
-    "load_config_file", "preset_config",
+    "apply_overrides", "load_config_file", "preset_config",
 ]

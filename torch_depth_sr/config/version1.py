@@ -9,7 +9,7 @@ from typing import Any
 
 from ..errors import ParameterError
 
-__all__ = ["FLAT_FIELDS", "VERSION1_DEFAULTS", "from_version1"]
+__all__ = ["FLAT_FIELDS", "VERSION1_DEFAULTS", "flat_changes", "from_version1", "to_version1"]
 
 # the version-1 defaults, as they stood when the format was retired (commit 046c797)
 VERSION1_DEFAULTS: dict = dict(
@@ -131,3 +131,159 @@ def _dict_field(v: Any, name: str) -> dict:
     if not isinstance(v, dict):
         raise ParameterError(name, v, "a dict")
     return v
+
+
+def to_version1(config) -> dict:
+    """The version-1 flat view of a :class:`~torch_depth_sr.config.RestorerConfig`: every field of
+    :data:`FLAT_FIELDS`, a group that is off written as its version-1 sentinel (``snap_rounds=0``, ...) and the
+    other fields of such a group at their version-1 defaults. :func:`from_version1` of it gives ``config`` back
+    wherever version 1 can say it (not: edge refit and edge snap with different colour sigmas, settings of a group
+    that is off)."""
+    c, v = config, dict(VERSION1_DEFAULTS)
+    v.update(num_layers=c.num_layers, degradation=c.degradation,
+             use_nonlocal=c.uses("nonlocal"), use_outliers=c.uses("outliers"), use_singular=c.uses("singular"))
+    w = c.weights
+    v.update(lam=w.lam, eta=w.eta, gamma=w.gamma, mu1=w.mu1, mu2=w.mu2, isotropic=w.isotropic)
+    v.update({name: getattr(c.block_matching, name) for name in (
+        "block_size", "search_window", "k", "include_self", "match_layers", "rematch", "rematch_lattice",
+        "color_weight", "temperature", "upsample_search_window", "upsample_k")})
+    s = c.singular
+    v.update(singular_tau=s.tau, singular_sigma_floor=s.sigma_floor, singular_rounds=s.rounds,
+             singular_support=s.support, singular_support_tol=s.support_tol, singular_line_support=s.line_support,
+             singular_gate=0.0 if s.gate is None else s.gate)
+    so = c.solver
+    v.update(cg_fixed_iters=so.fixed_iters, cg_tol=so.tol, cg_max_iter=so.max_iter, precondition=so.precondition,
+             implicit_backward=so.implicit_backward)
+    i = c.initial
+    v.update(init_fill=i.fill, init_keep_observed=i.keep_observed, init_singular=i.singular,
+             init_kernel_size=i.kernel_size, init_sigma_space=i.sigma_space, init_sigma_color=i.sigma_color,
+             init_dt_sigma_space=i.dt_sigma_space, init_dt_sigma_color=i.dt_sigma_color,
+             init_dt_iterations=i.dt_iterations)
+    u = c.upsampling
+    v.update(upsample_init=u.init, upsample_init_band=u.init_band, upsample_init_edge_band=u.init_edge_band,
+             upsample_init_consistency=u.init_consistency, upsample_tv_per_factor=u.tv_per_factor,
+             upsample_jbu=u.jbu.to_dict(), upsample_scale=u.multipliers.to_dict())
+    if c.sided_fill is not None:
+        params = {k: x for k, x in c.sided_fill.to_dict().items() if not (k == "quantiles" and x is None)}
+        v["extra"] = {"sided_fill_params": params}
+    elif i.fill != "pushpull":  # with push-pull the fill is off anyway: version 1 wrote nothing
+        v["extra"] = {"sided_fill": False}
+    if c.value_prior is None:
+        v["nl_value_weight"] = 0.0
+    else:
+        p = c.value_prior
+        v.update(nl_value_weight=p.weight, nl_value_var=p.var, nl_value_offset=p.offset, nl_value_ridge=p.ridge,
+                 nl_value_range=0.0 if p.range is None else p.range)
+    cs = c.clean_samples  # off = η unchanged, r and η₃ as on other samples
+    v.update(eta_clean=1.0 if cs is None else cs.eta,
+             nl_value_range_clean=0.0 if cs is None or cs.value_range is None else cs.value_range,
+             nl_value_weight_clean=0.0 if cs is None or cs.value_weight is None else cs.value_weight)
+    if c.guided_prior is None:
+        v["guided_prior"] = 0.0
+    else:
+        v.update(guided_prior=c.guided_prior.weight, prior_on_singular=c.guided_prior.on_singular)
+    v["fidelity_band"] = 0.0 if c.fidelity is None else c.fidelity.width
+    if c.upsample_hold is None:
+        v["upsample_output_band"] = 0.0
+    else:
+        h = c.upsample_hold
+        v.update(upsample_output_band=h.band, upsample_output_edge=h.edge,
+                 upsample_output_edge_threshold=h.edge_threshold)
+    if c.edge_snap is None:
+        v["snap_rounds"] = 0
+    else:
+        e = c.edge_snap
+        v.update(snap_rounds=e.rounds, snap_radius=e.radius, snap_share=e.share, snap_sigma_color=e.sigma_color,
+                 snap_sigma_space=0.0 if e.sigma_space is None else e.sigma_space)
+    if c.edge_refit is None:
+        v["snap_refit_radius"] = 0
+    else:
+        r = c.edge_refit
+        v.update(snap_refit_radius=r.radius, snap_refit_band=r.band, snap_refit_edge=r.edge)
+        if c.edge_snap is None:  # one colour sigma for both steps in version 1
+            v["snap_sigma_color"] = r.sigma_color
+    if c.guidance is not None:
+        v.update(guidance_net=True, guidance_channels=c.guidance.channels, guidance_range=c.guidance.range)
+    if c.refiner is not None:
+        v.update(refine_net=True, refine_channels=c.refiner.channels, refine_layers=c.refiner.layers,
+                 refine_task=c.refiner.task)
+    return v
+
+
+# the version-2 top-level fields each version-1 field sets
+_SETS: dict = {
+    **dict.fromkeys(("num_layers",), ("num_layers",)), "degradation": ("degradation",),
+    **dict.fromkeys(("use_nonlocal", "use_outliers", "use_singular"), ("terms",)),
+    **dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2", "isotropic"), ("weights",)),
+    **dict.fromkeys(("eta_clean", "nl_value_range_clean", "nl_value_weight_clean"), ("clean_samples",)),
+    "init_fill": ("initial", "sided_fill"),
+    **dict.fromkeys(("init_singular", "init_keep_observed", "init_kernel_size", "init_sigma_space", "init_sigma_color",
+                     "init_dt_sigma_space", "init_dt_sigma_color", "init_dt_iterations"), ("initial",)),
+    **dict.fromkeys(("guided_prior", "prior_on_singular"), ("guided_prior",)),
+    **dict.fromkeys(("guidance_net", "guidance_channels", "guidance_range"), ("guidance",)),
+    **dict.fromkeys(("refine_net", "refine_channels", "refine_layers", "refine_task"), ("refiner",)),
+    **dict.fromkeys(("upsample_init", "upsample_init_band", "upsample_init_edge_band", "upsample_init_consistency",
+                     "upsample_jbu", "upsample_tv_per_factor", "upsample_scale"), ("upsampling",)),
+    **dict.fromkeys(("upsample_output_band", "upsample_output_edge", "upsample_output_edge_threshold"),
+                    ("upsample_hold",)),
+    **dict.fromkeys(("block_size", "search_window", "k", "upsample_search_window", "upsample_k", "color_weight",
+                     "temperature", "include_self", "match_layers", "rematch", "rematch_lattice"),
+                    ("block_matching",)),
+    **dict.fromkeys(("nl_value_weight", "nl_value_var", "nl_value_offset", "nl_value_ridge", "nl_value_range"),
+                    ("value_prior",)),
+    **dict.fromkeys(("singular_tau", "singular_sigma_floor", "singular_rounds", "singular_support",
+                     "singular_support_tol", "singular_line_support", "singular_gate"), ("singular",)),
+    "fidelity_band": ("fidelity",),
+    **dict.fromkeys(("snap_rounds", "snap_radius", "snap_share", "snap_sigma_space"), ("edge_snap",)),
+    "snap_sigma_color": ("edge_snap", "edge_refit"),
+    **dict.fromkeys(("snap_refit_radius", "snap_refit_band", "snap_refit_edge"), ("edge_refit",)),
+    **dict.fromkeys(("cg_fixed_iters", "cg_tol", "cg_max_iter", "precondition", "implicit_backward"), ("solver",)),
+    "extra": ("sided_fill",),
+}
+
+def flat_changes(values: dict, base=None) -> dict:
+    """The version-2 changes (:meth:`RestorerConfig.replace <torch_depth_sr.config.RestorerConfig.replace>`
+    arguments) that a partial version-1 flat dict makes to ``base`` (default: the defaults).
+
+    Each version-1 field changes the group(s) it belonged to as version 1 would have: the group is read back to its
+    version-1 fields, the given ones replace them, and the group is converted again, so sentinels switch a step
+    off (``snap_rounds=0`` -> ``edge_snap=None``), a sentinel's opposite on again (merged into the group's
+    defaults), and a setting of a group that is off leaves it off. Groups the dict does not touch keep ``base``'s
+    settings exactly. A group that stays on comes back as a dict of the fields that change.
+
+    Examples:
+        >>> flat_changes({"k": 10, "snap_rounds": 0})
+        {'block_matching': {'k': 10}, 'edge_snap': None}
+    """
+    from .restorer import RestorerConfig
+
+    if not isinstance(values, dict):
+        raise ParameterError("version-1 settings", values, "a dict of version-1 RestorerConfig fields")
+    unknown = set(values) - FLAT_FIELDS
+    if unknown:
+        raise ParameterError("keys", sorted(unknown),
+                             f"version-1 RestorerConfig fields ({', '.join(sorted(FLAT_FIELDS))})",
+                             "Remove or rename the unknown keys.")
+    base = RestorerConfig() if base is None else base
+    new = from_version1({**to_version1(base), **values})
+    changes: dict = {}
+    for key in values:
+        for name in _SETS[key]:
+            old, now = getattr(base, name), getattr(new, name)
+            if name in changes or old == now:
+                continue
+            if now is None or not hasattr(now, "to_dict"):  # off, or a top-level value
+                changes[name] = now
+            else:  # merged into the current group, or into the group's defaults when it was off
+                changes[name] = _differences(type(now)() if old is None else old, now)
+    return changes
+
+
+def _differences(old, new) -> dict:
+    """The fields of group ``new`` that differ from group ``old`` (nested groups as dicts of theirs)."""
+    out = {}
+    for k, x in new.to_dict().items():
+        was, now = getattr(old, k), getattr(new, k)
+        if was != now:
+            out[k] = _differences(was, now) if hasattr(now, "to_dict") else now
+    return out

@@ -68,10 +68,12 @@ def _metrics(pred: torch.Tensor, sample: dict, track: str) -> dict:
 
 
 def _parse_config(text):
-    """``--config`` JSON of RestorerConfig overrides, checked before any scene runs."""
+    """``--config`` JSON of RestorerConfig overrides, checked before any scene runs: the version-2 form
+    (``{"block_matching": {"k": 10}}``, dotted ``{"block_matching.k": 10}``) or version-1 flat names (``{"k": 10}``),
+    as :func:`~torch_depth_sr.config.apply_overrides` takes them."""
     if not text:
         return None
-    from ..config import RestorerConfig
+    from ..config import RestorerConfig, apply_overrides
 
     try:
         overrides = json.loads(text)
@@ -80,7 +82,7 @@ def _parse_config(text):
     if not isinstance(overrides, dict):
         raise UsageError(f"--config must be a JSON object of RestorerConfig overrides; got {text!r}.")
     try:
-        RestorerConfig.from_dict(overrides)
+        apply_overrides(RestorerConfig(), overrides)
     except (TypeError, ValueError) as e:
         raise UsageError(f"--config: {e}") from e
     return overrides

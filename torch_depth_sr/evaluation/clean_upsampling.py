@@ -1,10 +1,10 @@
 """Guided upsampling against bicubic interpolation on the guided-SR test images (issue 12, "do no harm").
 
 ``python -m torch_depth_sr.evaluation.clean_upsampling [--sets Middlebury Lu] [--scale 4] [--noise 0]
-[--images 03 09 ...] [--trials JSON ...] [--noise-sigma S]`` prints, per image, the RMSE of bicubic interpolation and of the model
-for each trial (a JSON dict of ``RestorerConfig`` overrides; default: the defaults), then the means (all
-images, and the images that are not Middlebury 2006 fitting scenes) and on how many images each trial is
-worse than bicubic.
+[--images 03 09 ...] [--trials JSON ...] [--noise-sigma S]`` prints, per image, the RMSE of bicubic interpolation
+and of the model for each trial (a JSON dict of ``RestorerConfig`` overrides, as
+:func:`~torch_depth_sr.config.apply_overrides` takes them; default: the defaults), then the means (all images, and
+the images that are not Middlebury 2006 fitting scenes) and on how many images each trial is worse than bicubic.
 
 Protocol (``../shared/docs/benchmark.md``, track ``gdsr``, grey-level sets only), the same code as the track
 (:mod:`torch_depth_sr.evaluation.gdsr`, readers in :mod:`torch_depth_sr.datasets.gdsr`): crop to a multiple of the
@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from .._data_root import data_root
 from ..datasets.gdsr import FITTING, gdsr_images
+from ..config import RestorerConfig, apply_overrides
 from ..model import DepthRestorer
 from .gdsr import add_noise, bicubic as _bicubic, crop_to_multiple, degrade as _degrade_image, resize_pillow, rmse
 
@@ -59,7 +60,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--scale", type=int, default=4)
     ap.add_argument("--noise", type=float, default=0.0)
     ap.add_argument("--images", nargs="*", default=None, help="file indices, e.g. 03 09 (default: all)")
-    ap.add_argument("--trials", nargs="*", default=None, help="JSON dicts of RestorerConfig overrides")
+    ap.add_argument("--trials", nargs="*", default=None,
+                    help='JSON dicts of RestorerConfig overrides (docs/config.md), e.g. \'{"upsample_hold": null}\', '
+                         '\'{"upsampling.init_band": 2.0}\' or the version-1 \'{"upsample_init_band": 2.0}\'')
     ap.add_argument("--noise-sigma", type=float, default=None,
                     help="pass this noise_sigma (grey levels) to the model instead of letting it estimate σ "
                          "(0: the caller knows the input is noise-free)")
@@ -67,7 +70,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     args = ap.parse_args(argv)
     trials = [json.loads(t) for t in args.trials] if args.trials else [{}]
     labels = ["bicubic"] + [json.dumps(t) for t in trials]
-    models = [DepthRestorer(**t) for t in trials]
+    models = [DepthRestorer(apply_overrides(RestorerConfig(), t)) for t in trials]
     root = Path(args.data) if args.data else data_root()
     rows = []
     for dataset in args.sets:

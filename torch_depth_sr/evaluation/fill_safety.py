@@ -84,9 +84,10 @@ def bridging(pred: np.ndarray, sample: dict, tol: float = SIDE_TOL) -> dict:
 
 
 def _model(config: dict, fill: str):
+    from ..config import RestorerConfig, apply_overrides
     from ..model import DepthRestorer
 
-    model = DepthRestorer.ablation("full", **config)
+    model = DepthRestorer(apply_overrides(RestorerConfig(), config))
     if fill == "all":
         return lambda y, rgb: model(y, rgb)
     return lambda y, rgb: model(y, rgb, fill=fill)
@@ -185,7 +186,9 @@ def _mean(rows, key, pick):
 def main(argv: Optional[Sequence[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scenes", nargs="*", default=None, help="sensor scenes (default: all 21)")
-    ap.add_argument("--config", default=None, help="RestorerConfig overrides as JSON")
+    ap.add_argument("--config", default=None,
+                    help='RestorerConfig overrides as JSON (docs/config.md), e.g. \'{"sided_fill": {"gap": 3.0}}\' '
+                         "or version-1 flat names")
     ap.add_argument("--fill", default="all", choices=["all", "trusted"])
     ap.add_argument("--real", action="store_true", help="(c) outlier shares on the real frames (needs open3d)")
     ap.add_argument("--no-sensor", action="store_true", help="skip (a) and (b)")

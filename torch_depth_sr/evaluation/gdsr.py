@@ -12,10 +12,11 @@ trained --json F`` runs, per image of each set (:mod:`torch_depth_sr.datasets.gd
    scale (:func:`add_noise`). ``RGBDD_Test_Realscene``: the real 192x144 phone-ToF depth is the input instead
    (noise, if asked, is added to it), only at scale 4;
 3. methods: ``bicubic`` = Pillow's bicubic upsampling of the input to the ground truth's size (the networks'
-   input, DCTNet's ``DepthLrUp``); ``full`` = the frozen :class:`~torch_depth_sr.DepthRestorer` (defaults of
-   ``ablation("full")``) with ``degradation="bicubic"`` (the K of this protocol) plus any ``--config``
-   overrides; ``trained`` = the shipped ``from_pretrained("upsample")`` (the frozen model plus the edge refiner,
-   one model for every factor; ``--pretrained FOLDER`` evaluates a saved candidate instead);
+   input, DCTNet's ``DepthLrUp``); ``full`` = the frozen :class:`~torch_depth_sr.DepthRestorer` (the defaults,
+   preset ``default``) with ``degradation="bicubic"`` (the K of this protocol) plus any ``--config`` overrides
+   (:func:`~torch_depth_sr.config.apply_overrides`); ``trained`` = the shipped ``from_pretrained("upsample")``
+   (the frozen model plus the edge refiner, one model for every factor; ``--pretrained FOLDER`` evaluates a saved
+   candidate instead);
    ``trained-x4-refined`` = ``from_pretrained("upsample-x4-refined")``, a wider refiner for ×4 only; ``trained-x4`` =
    the older ``from_pretrained("upsample-x{s}")``, a row marked not available where no such model ships. The models get the low-resolution depth in the protocol's units and
    the full-resolution colour; input values <= 0 are missing. For the real scene, whose input is 192x144 for a
@@ -134,11 +135,13 @@ def make_model(method: str, scale: int, config: Optional[dict] = None, device: s
                pretrained: Optional[str] = None) -> Optional[DepthRestorer]:
     """The model behind a method name, or None where no such model exists (``trained-x4`` for a scale without a
     shipped ``upsample-x{scale}``). ``pretrained``: a saved model folder that ``trained`` loads instead."""
+    from ..config import RestorerConfig, apply_overrides
     from ..errors import DepthSRError
     from ..model import DepthRestorer
 
     if method == "full":
-        return DepthRestorer.ablation("full", **{"degradation": "bicubic", **(config or {})}).to(device).eval()
+        base = RestorerConfig(degradation="bicubic")  # then --config (which may set another degradation)
+        return DepthRestorer(apply_overrides(base, config)).to(device).eval()
     if method in ("trained", "trained-x4-refined"):
         name = "upsample" if method == "trained" else "upsample-x4-refined"
         if method == "trained-x4-refined" and scale != 4 and not pretrained:

@@ -49,8 +49,9 @@ def _timed(fn, device: str, repeats: int) -> float:
 def agreement(device: str, height: int, width: int, batch: int) -> dict:
     """GPU against CPU on the same inputs (matching and the whole model)."""
     y, rgb, gt = speed.make_inputs(height, width, batch, seed=3)
-    model = DepthRestorer(rematch="exact")  # the GPU always re-matches exactly; the CPU default refines
-    c = model.config
+    # the GPU always re-matches exactly; the CPU default refines
+    model = DepthRestorer(block_matching={"rematch": "exact"})
+    c = model.config.block_matching
     x = torch.where(y > 0, y, y[y > 0].mean()) / 255.0
     args = dict(block_size=c.block_size, search_window=c.search_window, k=c.k)
     m_cpu = block_match(x, rgb, None, **args)
@@ -68,7 +69,7 @@ def agreement(device: str, height: int, width: int, batch: int) -> dict:
 
 def matching_times(device: str, sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeats: int) -> list[dict]:
     """One block-matching pass (21×21 window, the model's block and k) per size and batch."""
-    c = DepthRestorer().config
+    c = DepthRestorer().config.block_matching
     rows = []
     for h, w in sizes:
         for b in batches:
@@ -82,7 +83,7 @@ def matching_times(device: str, sizes: Sequence[tuple[int, int]], batches: Seque
 
 def selection_times(device: str, sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeats: int) -> list[dict]:
     """Each way of taking the k smallest of the block-matching keys, on keys shaped like the model's."""
-    c = DepthRestorer().config
+    c = DepthRestorer().config.block_matching
     n = c.search_window ** 2
     rows = []
     for h, w in sizes:

@@ -5,7 +5,7 @@ Runs the default model once with exact re-matching on the speed benchmark's inpu
 then, per layer, runs each candidate algorithm on exactly those inputs and reports the share of the exact
 ``k`` nearest blocks it recovers (recall), the mean kept distance relative to the exact one, and its time
 (median of ``--repeats``). The effect on accuracy is measured by the benchmark tracks with
-``--config '{"rematch": "exact"}'`` and the default (``"refine"``, lattice 2)::
+``--config '{"block_matching": {"rematch": "exact"}}'`` and the default (``"refine"``, lattice 2)::
 
     python -m torch_depth_sr.evaluation.matching_candidates --size 480 640
 """
@@ -19,7 +19,6 @@ from typing import Optional, Sequence
 
 import torch
 
-from .. import stages
 from ..block_matching import BlockMatches, block_match, refine_matches
 from ..model import DepthRestorer
 from .report import print_table
@@ -45,21 +44,22 @@ def recall(found: BlockMatches, exact: BlockMatches) -> float:
 
 
 @contextmanager
-def _recording(calls: list):
-    """Record the inputs of every block-matching pass of the model."""
-    original = stages.run_block_matching  # what BlockMatcher calls
+def _recording(matcher, calls: list):
+    """Record the inputs and the matches of every re-matching pass of the model's block matcher (its
+    :meth:`~torch_depth_sr.stages.BlockMatcher.rematch`, which the scheduled layers call)."""
+    original = matcher.rematch
 
-    def record(x, ctx, q, settings, temperature, color_weight, previous=None):
-        m = original(x, ctx, q, settings, temperature, color_weight, previous)
-        calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if ctx.K.is_identity else None,
-                          rgb=ctx.rgb, previous=previous, exact=m, ctx=ctx))
+    def record(x, obs, q, previous):
+        m = original(x, obs, q, previous)
+        calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if obs.K.is_identity else None,
+                          rgb=obs.rgb, previous=previous, exact=m))
         return m
 
-    stages.run_block_matching = record
+    matcher.rematch = record
     try:
         yield
     finally:
-        stages.run_block_matching = original
+        del matcher.rematch  # the method again
 
 
 def _run(spec: dict, call: dict, kw: dict) -> BlockMatches:
@@ -77,15 +77,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--repeats", type=int, default=3)
     a = p.parse_args(argv)
     y, rgb, _ = make_inputs(*a.size, 1)
-    model = DepthRestorer(rematch="exact")
-    c = model.config
+    model = DepthRestorer(block_matching={"rematch": "exact"})
+    c = model.config.block_matching
     calls: list = []
-    with torch.no_grad(), _recording(calls):
+    matcher = model.block_matcher
+    with torch.no_grad(), _recording(matcher, calls):
         model(y, rgb)
     rows = []
     for n, call in enumerate(c for c in calls if c["previous"] is not None):
-        ctx = call["ctx"]
-        matcher = ctx.block_matcher
         kw = dict(block_size=c.block_size, search_window=c.search_window, k=c.k,
                   color_weight=float(matcher.color_weight), temperature=float(matcher.temperature))
         exact = call["exact"]

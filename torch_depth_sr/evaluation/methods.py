@@ -20,6 +20,7 @@ __all__ = [
     "JBF_TRACK_PARAMS",
     "JBU_PARAMS",
     "DICTIONARY_PARAMS",
+    "PRESET_OF",
     "RGF_PARAMS",
     "SHIPPED",
     "TAKES_PRETRAINED",
@@ -62,19 +63,21 @@ TAKES_PRETRAINED = ("trained", "trained-refined", "trained-x4", "trained-upsampl
 _MODEL_METHODS = ("tv", "tv+nl", "full", "full-fast", "paper-model", *SHIPPED)
 
 
+# the model methods' named configurations (``DepthRestorer.from_preset``)
+PRESET_OF = {"tv": "tv", "tv+nl": "tv+nl", "full": "default", "full-fast": "fast", "paper-model": "paper"}
+
+
 @lru_cache(maxsize=None)
 def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[str] = None):
+    from ..config import apply_overrides, preset_config
     from ..model import DepthRestorer
 
     if pretrained is not None:  # a candidate before it ships (run_method passes it to TAKES_PRETRAINED only)
         return DepthRestorer.load(pretrained).to(device)
     if name in SHIPPED:
         return DepthRestorer.from_pretrained(SHIPPED[name]).to(device)
-    if name == "full-fast":
-        return DepthRestorer.preset("fast", **json.loads(overrides)).to(device)
-    if name == "paper-model":  # the paper's model without the library's extensions (ablation "paper")
-        return DepthRestorer.ablation("paper", **json.loads(overrides)).to(device)
-    return DepthRestorer.ablation(name, **json.loads(overrides)).to(device)
+    # "paper-model": the paper's model without the library's extensions (preset "paper")
+    return DepthRestorer(apply_overrides(preset_config(PRESET_OF[name]), json.loads(overrides))).to(device)
 
 
 def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[dict] = None,
@@ -82,7 +85,9 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
     """Run ``name`` on a sample dict (``depth (1,h,w)``, ``rgb (3,H,W)``, optional ``factor``).
 
     ``config``: :class:`~torch_depth_sr.RestorerConfig` overrides for the model methods (``tv``, ``tv+nl``,
-    ``full``), e.g. ``{"block_size": 5}``; the shipped ``trained`` parameters and the baselines ignore it.
+    ``full``, ``full-fast``, ``paper-model``: :data:`PRESET_OF`), applied to the method's preset by
+    :func:`~torch_depth_sr.config.apply_overrides`, e.g. ``{"block_matching": {"block_size": 5}}`` (or the
+    version-1 ``{"block_size": 5}``); the shipped ``trained`` parameters and the baselines ignore it.
     ``track``: the benchmark track; ``jbf`` and ``rgf`` have settings fitted per track (``paper`` when not given).
     ``pretrained``: a folder written by :meth:`~torch_depth_sr.DepthRestorer.save` (a training run's ``best``) that
     ``trained``, ``trained-x4`` and ``trained-upsample`` load instead of the shipped parameters.

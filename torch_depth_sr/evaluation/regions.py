@@ -274,7 +274,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     ap.add_argument("--methods", nargs="*", default=["input", "jbf", "rgf", "full"])
     ap.add_argument("--scenes", nargs="*", default=None, help="scene names (default: all 21)")
     ap.add_argument("--config", default=None,
-                    help="JSON of RestorerConfig overrides: adds a method 'full+config' (full with them)")
+                    help="JSON of RestorerConfig overrides (as bench --config; docs/config.md): adds a method "
+                         "'full+config' (full with them)")
     ap.add_argument("--reference", default="rgf", help="method the others' squared-error gap is measured against")
     ap.add_argument("--json", default=None, help="write per-scene rows, the summary and metadata here")
     ap.add_argument("--figure", default=None, help="PNG of the region labels of the first scene (or --figure-scene)")

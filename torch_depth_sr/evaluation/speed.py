@@ -100,7 +100,7 @@ def _make_runner(method: str, device: str):
     if method in ("full", "full-fast"):
         from ..model import DepthRestorer
 
-        model = (DepthRestorer() if method == "full" else DepthRestorer.preset("fast")).to(device)
+        model = DepthRestorer.from_preset("default" if method == "full" else "fast").to(device)
 
         def run(y, rgb):
             r = model.restore_with_details(y, rgb, timings=True)
@@ -132,8 +132,8 @@ def _stage_runner(method: str):
     from ..model import DepthRestorer
 
     model = DepthRestorer()
-    c = model.config
-    kw = dict(block_size=c.block_size, search_window=c.search_window, k=c.k,
+    c, bm = model.config, model.config.block_matching
+    kw = dict(block_size=bm.block_size, search_window=bm.search_window, k=bm.k,
               color_weight=float(model.block_matcher.color_weight), temperature=float(model.block_matcher.temperature))
     cache: dict = {}
 
@@ -145,7 +145,7 @@ def _stage_runner(method: str):
     def run(y, rgb):
         yn, observed = normalised(y)
         if method == "x0-filter":
-            return initial_estimate(yn, observed, rgb, 1, c), None
+            return initial_estimate(yn, observed, rgb, 1, c.initial, c.sided_fill), None
         key = (y.data_ptr(), tuple(y.shape))
         if key not in cache:  # the estimate the passes match on, and a first pass for refine to start from
             x = fill_holes(yn, observed)

@@ -7,7 +7,9 @@
 * timing: median seconds of the model on a 640×480 synthetic frame (σ = 5, 5 % holes), after a warm-up,
   with the threads torch has.
 
-Each config is a JSON dict of :class:`~torch_depth_sr.RestorerConfig` overrides; ``{}`` is the default.
+Each config is a JSON dict of :class:`~torch_depth_sr.RestorerConfig` overrides as
+:func:`~torch_depth_sr.config.apply_overrides` takes them (version-2 groups, dotted paths, or version-1 flat
+names); ``{}`` is the default.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ from typing import Optional, Sequence
 import numpy as np
 import torch
 
-from ..config import RestorerConfig
+from ..config import RestorerConfig, apply_overrides
 from ..model import DepthRestorer
 from .tune import errors_by, fitting_samples
 
@@ -28,17 +30,17 @@ __all__ = ["DEFAULT_CONFIGS", "accuracy", "timing", "main"]
 
 DEFAULT_CONFIGS = (
     {},
-    {"search_window": 11, "match_layers": [2]},  # the "fast" preset
-    {"search_window": 11, "match_layers": [2], "k": 6},
-    {"search_window": 11, "match_layers": [2], "num_layers": 5},
-    {"search_window": 7, "match_layers": [2]},
-    {"match_layers": []},
-    {"block_size": 5},
+    {"block_matching": {"search_window": 11, "match_layers": [2]}},  # the "fast" preset's window and re-matching
+    {"block_matching": {"search_window": 11, "match_layers": [2], "k": 6}},
+    {"block_matching": {"search_window": 11, "match_layers": [2]}, "num_layers": 5},
+    {"block_matching": {"search_window": 7, "match_layers": [2]}},
+    {"block_matching": {"match_layers": []}},
+    {"block_matching": {"block_size": 5}},
 )
 
 
 def _model(overrides: dict) -> DepthRestorer:
-    return DepthRestorer(RestorerConfig.from_dict(overrides))
+    return DepthRestorer(apply_overrides(RestorerConfig(), overrides))
 
 
 def accuracy(overrides: dict, samples: Sequence[dict]) -> dict:
@@ -64,11 +66,16 @@ def timing(overrides: dict, height: int = 480, width: int = 640, repeats: int = 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--configs", nargs="*", default=None, help="JSON dicts of RestorerConfig overrides")
+    p.add_argument("--configs", nargs="*", default=None,
+                   help='JSON dicts of RestorerConfig overrides (docs/config.md), e.g. '
+                        '\'{"block_matching": {"k": 10}}\', '
+                        '\'{"block_matching.k": 10}\' or the version-1 \'{"k": 10}\'')
     p.add_argument("--part", choices=["accuracy", "timing", "both"], default="both")
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args(argv)
     configs = [json.loads(c) for c in args.configs] if args.configs else [dict(c) for c in DEFAULT_CONFIGS]
+    for c in configs:  # refuse a mistyped name before the first run
+        apply_overrides(RestorerConfig(), c)
     samples = fitting_samples(None, n_synthetic=0) if args.part != "timing" else None
     print(f"threads={torch.get_num_threads()}; RMSE: 2006 scenes, full images; seconds: 640x480 synthetic")
     for c in configs:

@@ -3,8 +3,12 @@
 ``python -m torch_depth_sr.evaluation.tune [--rounds 2] [--crop 160]`` runs a coordinate search:
 each parameter in turn is multiplied by a few factors, the best mean RMSE over tracks ``paper``
 and ``sensor`` on centre crops of the 2006 scenes (plus synthetic scenes) is kept, and the
-rounds repeat with finer factors. It prints every trial and the final config as JSON. The
-2005, 2003 and 2001 scenes are never used here.
+rounds repeat with finer factors. It prints every trial and the final values as JSON (a dict that ``--start``
+takes back). The 2005, 2003 and 2001 scenes are never used here.
+
+Parameters are named by their dotted version-2 paths (``weights.lam``, ``block_matching.temperature``; see
+``docs/config.md``); version-1 flat names (``lam``, ``temperature``) work too, read from and written through the
+version-1 view of the config (:func:`~torch_depth_sr.config.apply_overrides`).
 """
 from __future__ import annotations
 
@@ -15,12 +19,30 @@ from typing import Callable, Iterable, Optional, Sequence
 
 import torch
 
-from ..config import RestorerConfig
+from ..config import RestorerConfig, apply_overrides
+from ..config.version1 import FLAT_FIELDS, to_version1
 from ..model import DepthRestorer
 
-__all__ = ["SEARCH", "fitting_samples", "errors_by", "score", "coordinate_search", "main"]
+__all__ = ["SEARCH", "fitting_samples", "errors_by", "score", "coordinate_search", "get_value", "main"]
 
-SEARCH = ("singular_sigma_floor", "guided_prior", "lam", "eta", "mu2", "mu1", "gamma", "color_weight", "temperature")
+SEARCH = ("singular.sigma_floor", "guided_prior.weight", "weights.lam", "weights.eta", "weights.mu2", "weights.mu1",
+          "weights.gamma", "block_matching.color_weight", "block_matching.temperature")
+
+
+def get_value(config: RestorerConfig, name: str):
+    """The setting ``name`` of ``config``: a dotted version-2 path (``"weights.lam"``; None where a group on the
+    path is off) or a version-1 flat name (``"lam"``)."""
+    if name in FLAT_FIELDS:  # guided_prior: the version-1 weight β (0 = off)
+        return to_version1(config)[name]
+    value = config
+    for part in name.split("."):
+        if value is None:
+            return None
+        if not hasattr(value, part):
+            raise ValueError(f"unknown setting {name!r}: use a dotted path such as 'weights.lam' (docs/config.md) "
+                             "or a version-1 flat name such as 'lam'.")
+        value = getattr(value, part)
+    return value
 
 
 def fitting_samples(crop: Optional[int], n_synthetic: int = 4, tracks: Sequence[str] = ("paper", "sensor")
@@ -81,15 +103,18 @@ def coordinate_search(config: RestorerConfig, samples: Sequence[dict], rounds: i
     for rnd in range(rounds):
         factors = factors_first if rnd == 0 else (0.7, 1.4)
         for name in names:
-            base = getattr(config, name)
+            base = get_value(config, name)
+            if base is None:  # a step that is off
+                log(f"  skip {name}: off in this config")
+                continue
             for f in factors:
-                trial = config.replace(**{name: base * f})
+                trial = apply_overrides(config, {name: base * f})
                 t0 = time.perf_counter()
                 s = score(trial, samples)
-                log(f"round {rnd} {name}={getattr(trial, name):.4g}: {s:.4f} ({time.perf_counter() - t0:.1f}s)")
+                log(f"round {rnd} {name}={get_value(trial, name):.4g}: {s:.4f} ({time.perf_counter() - t0:.1f}s)")
                 if s < best:
                     best, config = s, trial
-            log(f"  keep {name}={getattr(config, name):.4g} -> {best:.4f}")
+            log(f"  keep {name}={get_value(config, name):.4g} -> {best:.4f}")
     return config, best
 
 
@@ -97,15 +122,20 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--rounds", type=int, default=2)
     p.add_argument("--crop", type=int, default=160)
-    p.add_argument("--names", nargs="*", default=list(SEARCH))
-    p.add_argument("--start", default=None, help="JSON of config overrides to start from")
+    p.add_argument("--names", nargs="*", default=list(SEARCH),
+                   help="settings to search: dotted paths (weights.lam) or version-1 names (lam)")
+    p.add_argument("--start", default=None,
+                   help='JSON of RestorerConfig overrides to start from (docs/config.md), e.g. '
+                        '\'{"weights.lam": 0.8}\', \'{"weights": {"lam": 0.8}}\' or the version-1 \'{"lam": 0.8}\'')
     p.add_argument("--factors", nargs="*", type=float, default=[0.25, 0.5, 2.0, 4.0])
     args = p.parse_args(argv)
     torch.set_num_threads(max(1, torch.get_num_threads()))
     samples = fitting_samples(args.crop)
-    cfg = RestorerConfig().replace(**(json.loads(args.start) if args.start else {}))
+    cfg = apply_overrides(RestorerConfig(), json.loads(args.start) if args.start else {})
+    for name in args.names:  # refuse a mistyped name before the first run
+        get_value(cfg, name)
     cfg, best = coordinate_search(cfg, samples, args.rounds, args.names, factors_first=tuple(args.factors))
-    print(json.dumps({n: getattr(cfg, n) for n in args.names}, indent=1), f"score {best:.4f}")
+    print(json.dumps({n: get_value(cfg, n) for n in args.names}, indent=1), f"score {best:.4f}")
 
 
 if __name__ == "__main__":

@@ -45,7 +45,7 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     d = TrainConfig()
     _add_shared_arguments(p, d, "run folder (checkpoint/, best/, last/, history.json)")
     p.add_argument("--guidance-lr", type=float, default=d.guidance_lr,
-                   help="learning rate of the guidance network's weights (--model '{\"guidance_net\": true}')")
+                   help="learning rate of the guidance network's weights (--model '{\"guidance\": {}}')")
     p.add_argument("--weight-decay", type=float, default=d.weight_decay)
     p.add_argument("--degradation", choices=["paper", "sensor", "mixed"], default=d.degradation)
     p.add_argument("--sigma", type=float, nargs=2, default=list(d.sigma), metavar=("MIN", "MAX"),
@@ -62,7 +62,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true", help="continue from <out>/checkpoint if present")
     p.add_argument("--stop-at", type=int, default=None, help="end this run after this step (resume later)")
     p.add_argument("--init", default=None, help="start from a pretrained name or saved folder (default: defaults)")
-    p.add_argument("--model", default="{}", help='RestorerConfig overrides as JSON, e.g. \'{"num_layers": 4}\'')
+    p.add_argument("--model", default="{}",
+                   help='RestorerConfig overrides as JSON (docs/config.md), e.g. \'{"num_layers": 4}\', '
+                        '\'{"block_matching": {"k": 10}}\', \'{"block_matching.k": 10}\' or the version-1 '
+                        '\'{"k": 10}\'')
 
 
 def config_from_args(args: argparse.Namespace) -> TrainConfig:
@@ -115,7 +118,8 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--source", choices=["middlebury2006", "gdsr"], default=d.source,
                    help="the 2006 scenes' files: the project's copy, or the guided-SR test set's versions of them")
     p.add_argument("--base", default=json.dumps(d.base),
-                   help="RestorerConfig overrides of the frozen model, as JSON (default: %(default)s)")
+                   help="RestorerConfig overrides of the frozen model, as JSON, as --model of train takes them "
+                        "(docs/config.md; default: %(default)s)")
     p.add_argument("--factors", type=int, nargs="+", default=list(d.factors), help="task upsample")
     p.add_argument("--noises", type=float, nargs="+", default=list(d.noises),
                    help="noise σ: upsample, on a 0-255 scale of each image's range (the gdsr protocol's); denoise, "

@@ -3,7 +3,8 @@
 The unrolled model is too slow on this CPU to be trained end to end with a CNN after it, and it does not need to
 be: its parameters stay as they are, so its outputs are computed once per training image (full images, every
 degradation) and the refiner learns on random crops of them. What the refiner learns from is exactly what the model
-hands it at inference: the model runs with a stand-in refiner that records its arguments (:func:`_recorded`), so
+hands it at inference: a copy of the model runs with a stand-in refiner that records its arguments
+(:func:`_recording_model`), so
 the bounds, the filled holes and the noise level are the model's own. Data, as for every trained parameter of the
 project: the Middlebury 2006 scenes (two held out for validation) and procedural synthetic scenes.
 
@@ -17,14 +18,13 @@ Two tasks (``task``):
   ``noises`` (grey levels), ``seeds`` draws each; the refiner then runs when K = I.
 
 Output: ``<out>/best`` and ``<out>/last``, :meth:`DepthRestorer.save` folders of the base model with
-``refine_net=True`` (``refine_task`` the task) and the refiner's weights, and ``<out>/history.json``.
+``refiner={"channels": ..., "layers": ..., "task": ...}`` (the task trained for) and the refiner's weights, and
+``<out>/history.json``.
 :func:`evaluate_refiners` scores saved models on one recipe's validation samples (runs compared on one set, e.g. at
 the test pitch, whatever pitch each was trained at).
 """
 from __future__ import annotations
 
-import contextlib
-import dataclasses
 import json
 import math
 import time
@@ -36,7 +36,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..config import RestorerConfig, apply_overrides
 from ..model import DepthRestorer
+from ..post_steps import post_steps
 from ..refiner import EdgeRefiner
 from ..transforms import Downsample
 from .datasets import middlebury_records
@@ -53,7 +55,8 @@ class RefinerConfig:
     # or as "gdsr" (the files of the same eleven scenes in the guided-SR test set, filled and in that set's own
     # rendering of the ground truth, which differs from the official maps at depth edges)
     source: str = "middlebury2006"
-    # RestorerConfig overrides of the frozen model; task "upsample" without ``init`` defaults to K = bicubic
+    # RestorerConfig overrides of the frozen model (config.apply_overrides: version-2 groups, dotted paths or
+    # version-1 names); task "upsample" without ``init`` defaults to K = bicubic
     base: dict = field(default_factory=dict)
     init: Optional[str] = None  # the frozen model from a pretrained name or a saved folder (then ``base`` overrides it)
     factors: tuple = (4, 8, 16)  # task "upsample"
@@ -141,16 +144,20 @@ class _Recorder(nn.Module):
         return x
 
 
-@contextlib.contextmanager
-def _recorded(base: DepthRestorer, task: str):
-    """``base`` with a :class:`_Recorder` as its refiner for ``task``; the model is put back afterwards."""
-    kept = base.refiner, base.refine_settings
-    base.refiner = _Recorder()
-    base.refine_settings = dataclasses.replace(kept[1], net=True, task=task)
-    try:
-        yield base.refiner
-    finally:
-        base.refiner, base.refine_settings = kept
+def _recording_model(base: DepthRestorer, task: str) -> tuple[DepthRestorer, _Recorder]:
+    """A copy of ``base`` (its settings and parameters) whose refiner, in the post-step of ``task`` (where a trained
+    refiner runs), is a :class:`_Recorder`; a refiner ``base`` has is left out. ``base`` is not changed."""
+    config = base.config.replace(refiner={"task": task})
+    model = DepthRestorer(config)
+    missing, unexpected = model.load_state_dict(
+        {k: v for k, v in base.state_dict().items() if not k.startswith("refiner.")}, strict=False)
+    if unexpected or any(not k.startswith("refiner.") for k in missing):
+        raise RuntimeError(f"the recording copy does not fit the model: missing {missing[:4]}, unexpected "
+                           f"{unexpected[:4]}")
+    recorder = _Recorder()
+    model.refiner = recorder
+    model.post = post_steps(config, recorder)
+    return model.to(base.block_matcher.log_temperature.device).eval(), recorder
 
 
 def _degraded(s: dict, cfg: RefinerConfig, g: torch.Generator, job: tuple) -> tuple[torch.Tensor, ...]:
@@ -180,13 +187,12 @@ def _samples(base: DepthRestorer, refiner: EdgeRefiner, scenes: list[dict], cfg:
     from tqdm import tqdm
 
     out = []
+    model, recorder = _recording_model(base, cfg.task)
     jobs = [(s, j) for s in scenes for j in _jobs(cfg)]
     for i, (s, job) in enumerate(tqdm(jobs, desc=f"model outputs ({tag})", disable=not cfg.progress)):
         g = torch.Generator().manual_seed(cfg.seed * 100_003 + i)
         low, rgb, gt, mask = _degraded(s, cfg, g, job)
-        with _recorded(base, cfg.task) as recorder:
-            info = base.restore_with_details(torch.where(low > 0, low, torch.full_like(low, float("nan"))),
-                                             rgb).info
+        info = model.restore_with_details(torch.where(low > 0, low, torch.full_like(low, float("nan"))), rgb).info
         x, filled, guide, level = (a.float() for a in recorder.args)
         offset, scale = info["offset"][0], info["scale"][0]
         phi, lo, hi, unit = refiner.prepare(x, filled, guide, level)
@@ -253,21 +259,25 @@ def _base_model(cfg: RefinerConfig) -> DepthRestorer:
     if cfg.upscale < 1:
         raise ValueError(f"upscale={cfg.upscale!r}; allowed is a whole number >= 1")
     if cfg.init is None:
-        k = {"degradation": "bicubic"} if cfg.task == "upsample" else {}
-        return DepthRestorer(**{**k, **cfg.base}).eval()
-    return _saved_model(cfg.init, **cfg.base)
+        start = RestorerConfig(degradation="bicubic") if cfg.task == "upsample" else RestorerConfig()
+        return DepthRestorer(apply_overrides(start, cfg.base)).eval()
+    return _saved_model(cfg.init, cfg.base)
 
 
-def _saved_model(name: str, **overrides) -> DepthRestorer:
-    """A saved folder or a pretrained name, in eval mode."""
-    if Path(name).is_dir():
-        return DepthRestorer.load(name, **overrides).eval()
-    return DepthRestorer.from_pretrained(name, **overrides).eval()
+def _saved_model(name: str, overrides: Optional[dict] = None) -> DepthRestorer:
+    """A saved folder or a pretrained name, in eval mode, with ``overrides`` of its settings
+    (:func:`~torch_depth_sr.config.apply_overrides`; its parameters must still fit)."""
+    model = DepthRestorer.load(name) if Path(name).is_dir() else DepthRestorer.from_pretrained(name)
+    if overrides:
+        changed = DepthRestorer(apply_overrides(model.config, overrides))
+        changed.load_state_dict(model.state_dict())
+        model = changed
+    return model.eval()
 
 
 def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
-    model = DepthRestorer(base.config.replace(refine_net=True, refine_channels=cfg.channels,
-                                              refine_layers=cfg.layers, refine_task=cfg.task))
+    model = DepthRestorer(base.config.replace(refiner={"channels": cfg.channels, "layers": cfg.layers,
+                                                       "task": cfg.task}))
     state = {**{k: v for k, v in base.state_dict().items() if not k.startswith("refiner.")},
              **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}}
     model.load_state_dict(state)
@@ -321,6 +331,21 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     return refiner
 
 
+def _settings(config: RestorerConfig) -> dict:
+    """Every setting of ``config`` by its dotted path (``"block_matching.k"``; a group that is off: its name, None)."""
+    out = {}
+
+    def walk(prefix: str, value) -> None:
+        if isinstance(value, dict) and value:
+            for k, v in value.items():
+                walk(f"{prefix}.{k}" if prefix else k, v)
+        else:
+            out[prefix] = value
+
+    walk("", {k: v for k, v in config.to_dict().items() if k != "version"})
+    return out
+
+
 def evaluate_refiners(cfg: RefinerConfig, models: list[str]) -> list[dict]:
     """The validation figures of saved models (folders or pretrained names, each with a refiner for ``cfg.task``) on
     the validation samples of ``cfg`` (its scenes, degradations and ``upscale``): one row per model and group (all,
@@ -334,12 +359,12 @@ def evaluate_refiners(cfg: RefinerConfig, models: list[str]) -> list[dict]:
     loaded = {}
     for name in models:
         model = _saved_model(name)
-        if model.refiner is None or model.refine_settings.task != cfg.task:
-            raise UsageError(f"{name}: has no refiner for task {cfg.task!r} (refine_net "
-                             f"{model.refiner is not None}, refine_task {model.refine_settings.task!r})")
-        settings = [{k: v for k, v in asdict(m.config).items() if not k.startswith("refine")} for m in (model, base)]
+        if model.config.refiner is None or model.config.refiner.task != cfg.task:
+            raise UsageError(f"{name}: has no refiner for task {cfg.task!r} (refiner {model.config.refiner})")
+        settings = [_settings(m.config.replace(refiner=None)) for m in (model, base)]
         weights = [{k: v for k, v in m.state_dict().items() if not k.startswith("refiner.")} for m in (model, base)]
-        differ = sorted(k for k in settings[1] if settings[0].get(k) != settings[1][k])
+        differ = sorted(k for k in set(settings[0]) | set(settings[1])
+                        if settings[0].get(k, "(absent)") != settings[1].get(k, "(absent)"))
         differ += sorted(k for k in weights[1] if k not in weights[0] or not torch.equal(weights[0][k], weights[1][k]))
         if differ:
             raise UsageError(f"{name}: its frozen model is not this recipe's (--init/--base); it differs in {differ}")

@@ -1,7 +1,7 @@
 r"""End-to-end training of the unrolled restorer's parameters.
 
 What is learned: every layer's raw (softplus) λ, η, γ, μ₁, μ₂, the log block-matching
-temperature and, with ``--model '{"guidance_net": true}'``, the weights of the guidance network
+temperature and, with ``--model '{"guidance": {}}'``, the weights of the guidance network
 (at their own learning rate ``guidance_lr``) of ``DepthRestorer(trainable=True)`` — all of
 ``model.parameters()`` that require grad — by AdamW through all layers (block-matching indices and the binary Q
 carry no gradient; the weights ω = softmax(−d/h) do). The loss is the mean squared (``l2``) or
@@ -33,7 +33,7 @@ import torch
 import torch.distributed as dist
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from ..config import RestorerConfig
+from ..config import RestorerConfig, apply_overrides
 from ..model import DepthRestorer
 from .datasets import make_datasets
 
@@ -48,7 +48,7 @@ class TrainConfig:
     batch_size: int = 4
     crop: int = 96
     lr: float = 0.03
-    # learning rate of the guidance network's weights (RestorerConfig.guidance_net), which start at 0 in the heads:
+    # learning rate of the guidance network's weights (RestorerConfig.guidance), which start at 0 in the heads:
     # Adam moves every weight by about lr per step, and the scalars' 0.03 would saturate the multipliers at once
     guidance_lr: float = 1e-3
     weight_decay: float = 0.0
@@ -72,7 +72,9 @@ class TrainConfig:
     resume: bool = False
     stop_at: Optional[int] = None  # end this run (with a checkpoint) after this step; --resume continues
     init: Optional[str] = None  # start from a pretrained name or a saved folder (default: config defaults)
-    model: dict = field(default_factory=dict)  # RestorerConfig overrides, e.g. {"num_layers": 2}
+    # RestorerConfig overrides (config.apply_overrides: version-2 groups, dotted paths or version-1 names), e.g.
+    # {"num_layers": 2} or {"guidance": {}}
+    model: dict = field(default_factory=dict)
     progress: bool = True
 
     def to_dict(self) -> dict:
@@ -178,14 +180,14 @@ def _initial_model(cfg: TrainConfig) -> DepthRestorer:
             base = DepthRestorer.load(cfg.init, trainable=True)
         else:
             base = DepthRestorer.from_pretrained(cfg.init)
-        model = DepthRestorer(base.config.replace(**cfg.model), trainable=True)
+        model = DepthRestorer(apply_overrides(base.config, cfg.model), trainable=True)
         # a guidance network switched on by cfg.model starts untrained (it multiplies by 1): only its keys may miss
         missing, unexpected = model.load_state_dict(base.state_dict(), strict=False)
         if unexpected or any(not k.startswith("guidance.") for k in missing):
             raise RuntimeError(f"--init {cfg.init} does not fit the model of --model {cfg.model}: missing "
                                f"{missing[:4]}, unexpected {unexpected[:4]}")
         return model
-    return DepthRestorer(RestorerConfig(), trainable=True, **cfg.model)
+    return DepthRestorer(apply_overrides(RestorerConfig(), cfg.model), trainable=True)
 
 
 def _param_groups(model: DepthRestorer, cfg: TrainConfig) -> list[dict]:

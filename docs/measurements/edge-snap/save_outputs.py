@@ -18,7 +18,7 @@ from torch_depth_sr.evaluation.bench import _samples
 
 OUT = os.environ.get("OUT", "/tmp/edge-snap")
 os.makedirs(OUT, exist_ok=True)
-model = DepthRestorer(snap_rounds=0, snap_refit_radius=0)
+model = DepthRestorer(edge_snap=None, edge_refit=None)
 for r, s in _samples("sensor", require_data_root(), sys.argv[1].split(","), None):
     y, rgb = s["depth"][None], s["rgb"][None]
     with torch.no_grad():

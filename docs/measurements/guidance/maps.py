@@ -5,7 +5,7 @@
 
 Writes a PNG mosaic (colour, input, output; the TV-threshold multiplier per direction and the nonlocal and outlier
 multipliers of the first and the last layer, log scale from 1/R (blue) to R (red), 1 = white, R the model's
-``guidance_range``, 4 unless set) and prints the percentiles of each log2-multiplier per layer and the share of
+``guidance.range``, 4 unless set) and prints the percentiles of each log2-multiplier per layer and the share of
 pixels within 5 % (in the log) of the cap as JSON.
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _log_map_to_bgr(log_m: np.ndarray, c: float) -> np.ndarray:
 
 def main() -> None:
     p = argparse.ArgumentParser()
-    p.add_argument("model", help="a saved model folder with guidance_net (e.g. runs/guided/best)")
+    p.add_argument("model", help="a saved model folder with a guidance network (e.g. runs/guided/best)")
     p.add_argument("--track", default="paper")
     p.add_argument("--scene", default="Art")
     p.add_argument("--data", default=None)
@@ -46,7 +46,7 @@ def main() -> None:
     (rec, sample), = list(_samples(a.track, a.data or data_root(), [a.scene], None))
     model = DepthRestorer.load(a.model)
     if model.guidance is None:
-        raise SystemExit(f"{a.model} has no guidance network (config guidance_net is false)")
+        raise SystemExit(f"{a.model} has no guidance network (its config's guidance is None)")
     raw = {}
     hooks = [h.register_forward_hook(lambda m, i, o, k=k: raw.__setitem__(k, o.detach()))
              for k, h in enumerate(model.guidance.heads)]

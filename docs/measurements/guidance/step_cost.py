@@ -31,7 +31,7 @@ def main() -> None:
     torch.set_num_threads(1)
     torch.manual_seed(0)
     ds = CropDataset(use_middlebury=False, synthetic=8, crop=96, length=64, seed=0)
-    model = DepthRestorer(trainable=True, guidance_net=bool(a.guidance))
+    model = DepthRestorer(trainable=True, guidance={} if a.guidance else None)
     opt = torch.optim.AdamW(_param_groups(model, TrainConfig()), lr=0.03)
 
     def step(i: int) -> float:

@@ -1,12 +1,13 @@
 """The training command's validation figure for saved or shipped models, optionally with config overrides.
 
-    PYTHONPATH=. python docs/measurements/guidance/validate.py denoise-guided 'denoise-guided:{"guidance_range": 16}' \
-        runs/g2-r16/best
+    PYTHONPATH=. python docs/measurements/guidance/validate.py denoise-guided \
+        'denoise-guided:{"guidance": {"range": 16}}' runs/g2-r16/best
 
 Each argument is ``MODEL[:JSON]``: a shipped name (``from_pretrained``) or a saved folder (a ``/`` in it), and
-fields to replace in its config (its weights are kept). Prints the mean RMSE over the two tracks and per track
-RMSE / MAE: the same 16 crops per track, σ = 5, as ``torch-depth-sr train`` with its defaults (``--val-size 16``),
-so the figure equals a run's step-0 line with ``--init MODEL``.
+settings to change in its config (its weights are kept), as ``config.apply_overrides`` takes them: version-2
+groups or dotted paths, or version-1 flat names (``{"guidance_range": 16}``). Prints the mean RMSE over the two
+tracks and per track RMSE / MAE: the same 16 crops per track, σ = 5, as ``torch-depth-sr train`` with its defaults
+(``--val-size 16``), so the figure equals a run's step-0 line with ``--init MODEL``.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from typing import Optional, Sequence
 import torch
 
 from torch_depth_sr import DepthRestorer
+from torch_depth_sr.config import apply_overrides
 from torch_depth_sr.training import TrainConfig, evaluate, make_datasets
 
 
@@ -31,7 +33,7 @@ def main(argv: Optional[Sequence[str]] = None) -> None:
     for arg in (sys.argv[1:] if argv is None else argv):
         name, _, overrides = arg.partition(":")
         base = DepthRestorer.load(name) if "/" in name else DepthRestorer.from_pretrained(name)
-        model = DepthRestorer(base.config.replace(**(json.loads(overrides) if overrides else {})))
+        model = DepthRestorer(apply_overrides(base.config, json.loads(overrides) if overrides else {}))
         model.load_state_dict(base.state_dict())
         model.eval()
         t = time.perf_counter()

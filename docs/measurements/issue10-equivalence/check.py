@@ -8,6 +8,11 @@ case. Run it once per code base (PYTHONPATH decides which) or both at once:
     TORCH_DEPTH_SR_DATA=... python check.py both /path/to/base/checkout /path/to/new/checkout
     python check.py run out.pt          # with the package on PYTHONPATH
     python check.py compare base.pt new.pt
+
+The models are named by version-1 settings and named configurations (:func:`_model`), built through the API of
+the code base that runs: ``DepthRestorer.ablation`` and flat keywords before the version-2 config (commit
+046c797 and earlier), ``preset_config`` and ``config.apply_overrides`` after it; so both sides of that change
+run the same cases.
 """
 from __future__ import annotations
 
@@ -22,6 +27,21 @@ import torch.nn.functional as F
 
 # parameters that moved to the module owning them: compared under their old names
 _LEGACY_NAMES = {"block_matcher.log_temperature": "log_temperature"}
+
+
+def _model(preset: str = "full", trainable: bool = False, **flat):
+    """The model of a version-1 named configuration (``"full"`` = the defaults, ``"paper"``, ``"tv"``, ``"tv+nl"``)
+    with version-1 flat settings, in the API of the code base on PYTHONPATH."""
+    from torch_depth_sr import DepthRestorer
+
+    try:
+        from torch_depth_sr.config import apply_overrides, preset_config
+    except ImportError:  # version 1: flat keywords, named configurations as ablations
+        if preset == "full":
+            return DepthRestorer(trainable=trainable, **flat)
+        return DepthRestorer.ablation(preset, **flat)
+    config = preset_config("default" if preset == "full" else preset)
+    return DepthRestorer(apply_overrides(config, flat), trainable=trainable)
 
 
 def _inputs(factor: int, degradation: str, holes: bool, dtype=torch.float32):
@@ -88,14 +108,14 @@ def run(path: str) -> None:
         tag = "holes" if holes else "full"
         y, rgb = _inputs(1, "area", holes)
         results[f"denoise/{tag}"] = _details(DepthRestorer(), y, rgb)
-        results[f"denoise/{tag}/paper"] = _details(DepthRestorer.ablation("paper"), y, rgb)
-        results[f"denoise/{tag}/tv"] = _details(DepthRestorer.ablation("tv"), y, rgb)
-        results[f"denoise/{tag}/tv+nl"] = _details(DepthRestorer.ablation("tv+nl"), y, rgb)
-        results[f"denoise/{tag}/init_singular"] = _details(DepthRestorer(init_singular=True), y, rgb)
+        results[f"denoise/{tag}/paper"] = _details(_model("paper"), y, rgb)
+        results[f"denoise/{tag}/tv"] = _details(_model("tv"), y, rgb)
+        results[f"denoise/{tag}/tv+nl"] = _details(_model("tv+nl"), y, rgb)
+        results[f"denoise/{tag}/init_singular"] = _details(_model(init_singular=True), y, rgb)
         results[f"denoise/{tag}/no_guided_prior_on_singular"] = _details(
-            DepthRestorer(prior_on_singular=False, init_keep_observed=False), y, rgb)
+            _model(prior_on_singular=False, init_keep_observed=False), y, rgb)
         results[f"denoise/{tag}/jbf_exact_converged"] = _details(
-            DepthRestorer(init_fill="jbf", rematch="exact", cg_fixed_iters=()), y, rgb)
+            _model(init_fill="jbf", rematch="exact", cg_fixed_iters=()), y, rgb)
         results[f"denoise/{tag}/no_guide"] = _details(DepthRestorer(), y, None)
         results[f"denoise/{tag}/fill_trusted"] = _details(DepthRestorer(), y, rgb, fill="trusted")
         results[f"denoise/{tag}/pretrained"] = _details(DepthRestorer.from_pretrained("denoise"), y, rgb)
@@ -108,9 +128,9 @@ def run(path: str) -> None:
                 results[key] = _details(DepthRestorer(degradation=deg), y, rgb)
                 results[key + "/fill_trusted"] = _details(DepthRestorer(degradation=deg), y, rgb, fill="trusted")
                 results[key + "/bicubic_init"] = _details(
-                    DepthRestorer(degradation=deg, upsample_init="bicubic", upsample_tv_per_factor=False,
-                                  upsample_scale={"lam": 2.0}, upsample_jbu={"radius": 3}), y, rgb)
-                results[key + "/paper"] = _details(DepthRestorer.ablation("paper", degradation=deg), y, rgb)
+                    _model(degradation=deg, upsample_init="bicubic", upsample_tv_per_factor=False,
+                           upsample_scale={"lam": 2.0}, upsample_jbu={"radius": 3}), y, rgb)
+                results[key + "/paper"] = _details(_model("paper", degradation=deg), y, rgb)
                 if factor == 4:
                     results[key + "/pretrained"] = _details(DepthRestorer.from_pretrained("upsample-x4"), y, rgb)
     # the layouts, dtypes and array types that restore_depth converts (numpy, (H,W), (1,H,W), uint16, uint8 colour)

@@ -10,9 +10,10 @@ import time
 import torch
 
 from torch_depth_sr import DepthRestorer
+from torch_depth_sr.config import RestorerConfig, apply_overrides
 from torch_depth_sr.datasets.synthetic import make_scene
 
-SETTINGS = {
+SETTINGS = {  # version-1 names (config.apply_overrides converts them)
     "former defaults (k 10 in 21x21)": dict(k=10, search_window=21, nl_value_weight_clean=0.0),
     "k 20 in 21x21": dict(k=20, search_window=21),
     "k 20 in 15x15": dict(k=20, search_window=15),
@@ -26,7 +27,7 @@ def main() -> None:
     s = make_scene(370, 465, seed=3)
     y = (s["gt"] + 5 * torch.randn(s["gt"].shape, generator=torch.Generator().manual_seed(0))).clamp_min(1)[None]
     rgb = s["rgb"][None]
-    models = {name: DepthRestorer(**c) for name, c in SETTINGS.items()}
+    models = {name: DepthRestorer(apply_overrides(RestorerConfig(), c)) for name, c in SETTINGS.items()}
     times: dict = {name: [] for name in models}
     with torch.no_grad():
         for m in models.values():  # warm-up: numba compiles on first use
