@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import types
+import typing
 from pathlib import Path
 
 import pytest
@@ -20,8 +21,15 @@ from torch_depth_sr.layers import UnrolledLayer
 from torch_depth_sr.operators import AreaDownsample, BicubicDownsample, Identity
 from torch_depth_sr.terms import SingularTest
 
-GROUPS = tuple(f.name for f in dataclasses.fields(RestorerConfig)
-               if isinstance(getattr(RestorerConfig(), f.name), Group) or f.name in ("guidance", "refiner"))
+
+def _group_type(hint):
+    """The settings group a field holds (``Optional[G]``: G), or None for a plain value."""
+    kinds = [t for t in (hint, *typing.get_args(hint)) if isinstance(t, type) and issubclass(t, Group)]
+    return kinds[0] if kinds else None
+
+
+GROUPS = tuple(name for name, hint in typing.get_type_hints(RestorerConfig).items()
+               if name in {f.name for f in dataclasses.fields(RestorerConfig)} and _group_type(hint))
 PRETRAINED = sorted((Path(torch_depth_sr.__file__).parent / "pretrained").glob("*/config.json"))
 # every group on, so that each is compared field by field
 ALL_ON = RestorerConfig().replace(guidance={}, refiner={})
