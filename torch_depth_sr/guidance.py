@@ -56,20 +56,29 @@ class GuidanceMaps(NamedTuple):
     nonlocal_: torch.Tensor
     outlier: torch.Tensor
 
-    def tv_isotropic(self) -> torch.Tensor:
-        """The multiplier of the group (isotropic) TV threshold: the geometric mean of the two directions'."""
-        return self.tv.prod(1, keepdim=True).sqrt()
+    def tv_threshold(self, threshold: torch.Tensor, isotropic: bool) -> torch.Tensor:
+        """λ/μ₁ per pixel; the group (isotropic) threshold takes the geometric mean of the two directions'."""
+        return threshold * (self.tv.prod(1, keepdim=True).sqrt() if isotropic else self.tv)
+
+    def nonlocal_threshold(self, threshold: torch.Tensor) -> torch.Tensor:
+        return threshold * self.nonlocal_
+
+    def outlier_threshold(self, threshold: torch.Tensor) -> torch.Tensor:
+        return threshold * self.outlier
 
 
-class UnitMultipliers(NamedTuple):
-    """The multipliers of a model without a guidance network: every threshold times 1 (exactly)."""
+class UnitMultipliers:
+    """The thresholds of a model without a guidance network: as they are (no operation, so gradients flow as in the
+    scalar model)."""
 
-    tv: float = 1.0
-    nonlocal_: float = 1.0
-    outlier: float = 1.0
+    def tv_threshold(self, threshold: torch.Tensor, isotropic: bool) -> torch.Tensor:
+        return threshold
 
-    def tv_isotropic(self) -> float:
-        return 1.0
+    def nonlocal_threshold(self, threshold: torch.Tensor) -> torch.Tensor:
+        return threshold
+
+    def outlier_threshold(self, threshold: torch.Tensor) -> torch.Tensor:
+        return threshold
 
 
 class NoGuidance:

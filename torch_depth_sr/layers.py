@@ -100,8 +100,9 @@ class UnrolledLayer(nn.Module):
         super().__init__()
         self.index = index
         self.upsampling: UpsamplingConfig = config.upsampling  # the weights' policy under guided upsampling
-        # λ / s^tv_exponent under guided upsampling by s (TV of an s-times finer grid grows like s)
-        self.tv_exponent = int(config.upsampling.tv_per_factor)
+        self.isotropic = config.weights.isotropic  # group TV shrinkage: its threshold's guidance multiplier
+        # λ / s under guided upsampling by s with tv_per_factor (TV of an s-times finer grid grows like s)
+        self._tv_scale = _per_factor if config.upsampling.tv_per_factor else _as_is
         self.terms = nn.ModuleDict({task: terms_for(config, task) for task in TASKS})
         self.steps = nn.ModuleDict({task: match_steps(config, task, index) for task in TASKS})
         self.linear_solver = LinearSolver(config.solver, index)
@@ -120,24 +121,30 @@ class UnrolledLayer(nn.Module):
         multiplier, and λ divided by the factor with ``tv_per_factor`` (TV of an s-times finer grid grows like s for
         the same surface; the quadratic terms do not)."""
         weights = tuple(self.value(n).to(dtype) for n in self.names)
-        return _WEIGHT_POLICY[obs.task](self.upsampling.multipliers, obs.K.scale ** self.tv_exponent, weights)
+        return _WEIGHT_POLICY[obs.task](self.upsampling.multipliers, self._tv_scale, obs.K.scale, weights)
 
     def forward(self, s: RestorationState, obs: Observation) -> RestorationState:
+        # the order in which the operations are created is part of the result: the backward pass sums the gradients
+        # that reach a tensor in that order (floating point)
         K = obs.K
         lam, eta, gamma, mu1, mu2 = self.weights(obs, s.x.dtype)
+        dx = grad(s.x)  # (B,2,H,W)
         residual = obs.y - K(s.x)  # (B,1,h,w)
-        step = LayerStep(state=s, lam=lam, eta=eta, gamma=gamma, mu1=mu1, mu2=mu2, dx=grad(s.x), residual=residual,
-                         maps=obs.guidance.maps(self.index, s.x, s.q, residual, obs.observed), w=s.w, e=s.e,
-                         alpha=s.alpha, matches=s.matches, q=s.q, confidence=s.confidence, clean=s.clean)
+        tv_threshold = lam / mu1
+        maps = obs.guidance.maps(self.index, s.x, s.q, residual, obs.observed)
+        step = LayerStep(state=s, lam=lam, eta=eta, gamma=gamma, mu1=mu1, mu2=mu2, dx=dx, residual=residual,
+                         maps=maps, tv_threshold=maps.tv_threshold(tv_threshold, self.isotropic),
+                         outlier_threshold=maps.outlier_threshold(gamma), w=s.w, e=s.e, alpha=s.alpha,
+                         matches=s.matches, q=s.q, confidence=s.confidence, clean=s.clean)
         terms = self.terms[obs.task]
         for term in terms:
             term.split(step, obs)
         for match_step in self.steps[obs.task]:
             match_step(step, obs)
-        system = System(rhs=K.adjoint(step.q * (obs.y - step.e)), diag=torch.zeros_like(s.x))
+        system = System(rhs=K.adjoint(step.q * (obs.y - step.e)))
         for term in terms:
             term.system(step, obs, system)
-        x = self.linear_solver(obs, step.q, system.mu, system.rhs, s.x, diag=system.diag)
+        x = self.linear_solver(obs, step.q, system.mu(), system.rhs, s.x, diag=system.diag)
         return replace(s, x=x, z=step.z, w=step.w, e=step.e, alpha=step.alpha, q=step.q, confidence=step.confidence,
                        matches=step.matches, clean=step.clean)
 
@@ -145,13 +152,21 @@ class UnrolledLayer(nn.Module):
         return f"index={self.index}, " + ", ".join(f"{k}={v:.3g}" for k, v in self.values().items())
 
 
-def _denoise_weights(m: LayerMultipliers, tv_divisor: int, weights: tuple) -> tuple:
+def _denoise_weights(m: LayerMultipliers, tv_scale, factor: int, weights: tuple) -> tuple:
     return weights
 
 
-def _upsample_weights(m: LayerMultipliers, tv_divisor: int, weights: tuple) -> tuple:
+def _upsample_weights(m: LayerMultipliers, tv_scale, factor: int, weights: tuple) -> tuple:
     lam, eta, gamma, mu1, mu2 = (v * float(f) for v, f in zip(weights, (m.lam, m.eta, m.gamma, m.mu1, m.mu2)))
-    return lam / tv_divisor, eta, gamma, mu1, mu2
+    return tv_scale(lam, factor), eta, gamma, mu1, mu2
+
+
+def _per_factor(lam: torch.Tensor, factor: int) -> torch.Tensor:
+    return lam / factor
+
+
+def _as_is(lam: torch.Tensor, factor: int) -> torch.Tensor:
+    return lam
 
 
 _WEIGHT_POLICY = {"denoise": _denoise_weights, "upsample": _upsample_weights}

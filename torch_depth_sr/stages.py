@@ -203,14 +203,16 @@ class SingularDetector(nn.Module):
 
 
 # ---- the x-update -----------------------------------------------------------------------------------
-def _neumann(q: torch.Tensor, diag: torch.Tensor, mu: torch.Tensor, scale: int) -> NeumannPreconditioner:
+def _neumann(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int) -> NeumannPreconditioner:
     """The preconditioner of the system with KᵀQK replaced by mean(Q)/s² (KᵀK maps a constant image to 1/s² of it)
     and the diagonal by its mean."""
-    a = q.flatten(1).mean(1) / (scale ** 2) + diag.flatten(1).mean(1)  # (B,)
+    a = q.flatten(1).mean(1) / (scale ** 2)  # (B,)
+    if diag is not None:
+        a = a + diag.flatten(1).mean(1)
     return NeumannPreconditioner(a.detach(), mu.detach())
 
 
-def _no_preconditioner(q: torch.Tensor, diag: torch.Tensor, mu: torch.Tensor, scale: int) -> None:
+def _no_preconditioner(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int) -> None:
     return None
 
 
@@ -218,7 +220,7 @@ class LinearSolver(nn.Module):
     r"""The x-update of layer ``index``: :math:`(K^\top QK + \mathrm{diag} + \mu D^\top D)\,x = \mathrm{rhs}` by
     preconditioned CG (:func:`~torch_depth_sr.solvers.implicit.cg_solve`) warm-started at the current estimate,
     settings :class:`~torch_depth_sr.config.SolverConfig`. ``diag`` (B,1,H,W) holds the diagonal terms (the guided
-    prior's β(1−Q), the value prior's weights). With a fixed iteration count for the layer
+    prior's β(1−Q), the value prior's weights; None when no term has one). With a fixed iteration count for the layer
     (``settings.iterations(index)``) CG runs that many iterations (a sample that reaches ``settings.tol`` earlier
     stops changing) and never makes the host wait for the device; without one it iterates until every sample
     reaches ``settings.tol`` (at most ``settings.max_iter``). Appends the ``(B,)`` iteration counts to
@@ -233,12 +235,13 @@ class LinearSolver(nn.Module):
         self._preconditioner = _neumann if settings.precondition else _no_preconditioner
 
     def forward(self, obs: Observation, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
-                diag: torch.Tensor) -> torch.Tensor:
+                diag: Optional[torch.Tensor] = None) -> torch.Tensor:
         c, K = self.settings, obs.K
         q = q.detach()
 
         def apply_a(v: torch.Tensor) -> torch.Tensor:
-            return K.adjoint(q * K(v)) + mu * laplacian(v) + diag * v
+            av = K.adjoint(q * K(v)) + mu * laplacian(v)
+            return av if diag is None else av + diag * v
 
         with stage(obs.log.timings, "cg", x0.device):
             res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=self._preconditioner(q, diag, mu, K.scale),

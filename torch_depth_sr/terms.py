@@ -15,7 +15,7 @@ The order of the list is the order of the sums (floating point: the order is par
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Optional
 
 import torch
@@ -50,6 +50,8 @@ class LayerStep:
     dx: torch.Tensor  # (B,2,H,W)
     residual: torch.Tensor  # (B,1,h,w) y − Kx
     maps: Any  # GuidanceMaps, or unit multipliers without a guidance network
+    tv_threshold: Any = None  # λ/μ₁ times its guidance multipliers
+    outlier_threshold: Any = None  # γ times its guidance multiplier
     z: Optional[torch.Tensor] = None
     w: Optional[torch.Tensor] = None
     e: Optional[torch.Tensor] = None
@@ -64,20 +66,25 @@ class LayerStep:
 
 @dataclass
 class System:
-    """The x-update's system as the terms add to it: right-hand side, diagonal (from 0) and μ of μDᵀD (the TV
-    term's μ₁ first)."""
+    """The x-update's system as the terms add to it: right-hand side, diagonal (None = 0) and μ of μDᵀD (the TV
+    term's μ₁ first). Nothing is added that a term did not contribute: no zeros, so that the gradients flow through
+    the same operations whichever terms there are."""
 
     rhs: torch.Tensor
-    diag: torch.Tensor
-    mu: Optional[torch.Tensor] = None
+    diag: Optional[torch.Tensor] = None
+    mus: list = field(default_factory=list)
 
     def add(self, rhs: torch.Tensor, diag: Optional[torch.Tensor] = None) -> None:
         self.rhs = self.rhs + rhs
         if diag is not None:
-            self.diag = self.diag + diag
+            self.diag = diag if self.diag is None else self.diag + diag
 
     def add_mu(self, mu: torch.Tensor) -> None:
-        self.mu = mu if self.mu is None else self.mu + mu
+        self.mus.append(mu)
+
+    def mu(self) -> torch.Tensor:
+        """μ of μDᵀD, summed when the system is solved."""
+        return sum(self.mus[1:], self.mus[0])
 
 
 class Term(nn.Module):
@@ -96,12 +103,10 @@ class TVTerm(Term):
     def __init__(self, isotropic: bool):
         super().__init__()
         self.isotropic = isotropic
-        # the group threshold takes the geometric mean of the two directions' guidance multipliers
         self.shrink = group_soft_threshold if isotropic else soft_threshold
-        self.multiplier = _geometric_mean if isotropic else _per_direction
 
     def split(self, step: LayerStep, obs: Observation) -> None:
-        step.z = self.shrink(step.dx, step.lam / step.mu1 * self.multiplier(step.maps))
+        step.z = self.shrink(step.dx, step.tv_threshold)
 
     def system(self, step: LayerStep, obs: Observation, out: System) -> None:
         out.add(step.mu1 * grad_adjoint(step.z))
@@ -122,7 +127,7 @@ class NonlocalTerm(Term):
 
     def split(self, step: LayerStep, obs: Observation) -> None:
         eta = self._eta(step.eta, step.state.clean, self.clean)
-        step.w = soft_threshold(step.dx - step.state.alpha, eta / step.mu2 * step.maps.nonlocal_)
+        step.w = soft_threshold(step.dx - step.state.alpha, step.maps.nonlocal_threshold(eta / step.mu2))
 
     def extra_repr(self) -> str:
         return "" if self.clean is None else f"clean_eta={self.clean.eta:g}"
@@ -136,7 +141,7 @@ class OutlierTerm(Term):
     """γ‖e‖₁: the sparse outliers of the residual on trusted pixels (the data term reads e)."""
 
     def split(self, step: LayerStep, obs: Observation) -> None:
-        step.e = step.state.q * soft_threshold(step.residual, step.gamma * step.maps.outlier)
+        step.e = step.state.q * soft_threshold(step.residual, step.outlier_threshold)
 
 
 class GuidedPriorTerm(Term):
@@ -275,10 +280,3 @@ def _weight_on_clean_samples(weight: float, weight_clean: Optional[float], value
 
     return per_sample if value and weight_clean is not None and weight_clean != weight else same
 
-
-def _per_direction(maps: Any) -> Any:
-    return maps.tv
-
-
-def _geometric_mean(maps: Any) -> Any:
-    return maps.tv_isotropic()

@@ -8,6 +8,9 @@ from typing import Any, Callable
 
 from ..errors import ParameterError
 
+__all__ = ["Check", "boolean", "choice", "int_tuple", "integer", "is_int", "is_real", "non_negative", "optional",
+           "positive", "real", "str_tuple"]
+
 Check = Callable[[str, Any], None]
 
 
