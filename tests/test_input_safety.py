@@ -230,7 +230,7 @@ def test_big_endian_depth_is_accepted(dtype):
     d = _depth().astype(dtype)
     out = restore_depth(d, _rgb(), **TINY)
     native = restore_depth(d.astype(np.dtype(dtype).newbyteorder("=")), _rgb(), **TINY)
-    assert out.dtype == d.dtype
+    assert out.dtype == native.dtype == np.dtype(dtype).newbyteorder("=") and out.dtype.isnative  # >u2 in, uint16 out
     np.testing.assert_array_equal(out, native)
 
 
@@ -332,3 +332,74 @@ def test_shape_errors_carry_the_actual_and_expected_shapes():
     with pytest.raises(ShapeError) as info:
         DepthRestorer(num_layers=1)(torch.rand(1, 2, 16, 16) + 1)
     assert info.value.actual == (1, 2, 16, 16) and info.value.expected == "(B,1,H,W)"
+
+
+# ---- issue 26 item 10: the last raw errors -----------------------------------------------------------
+@pytest.mark.parametrize("factor", [1, 2])
+@pytest.mark.parametrize("dtype", [">f4", ">u2"])
+def test_big_endian_depth_colour_and_mask_give_the_native_output_bit_for_bit(dtype, factor):
+    """A PFM (``>f4``) or raw 16-bit PGM (``>u2``) depth, 16-bit big-endian colour and a big-endian mask: the output
+    is exactly that of the same values in native byte order, in native byte order (``>u2`` in, ``uint16`` out)."""
+    d = (_depth(12, 16) * 10).astype(dtype)
+    rgb = (_rgb(12 * factor, 16 * factor).astype(np.uint16) * 257).astype(">u2")
+    mask = np.ones(d.shape, ">f4")
+    mask[2:4, 3:6] = 0
+    out = restore_depth(d, rgb, mask=mask, return_details=True, **TINY)
+    native = [a.astype(a.dtype.newbyteorder("=")) for a in (d, rgb, mask)]
+    ref = restore_depth(*native, return_details=True, **TINY)
+    assert out.depth.dtype == np.dtype(dtype).newbyteorder("=") and out.depth.dtype.isnative
+    np.testing.assert_array_equal(out.depth, ref.depth)
+    np.testing.assert_array_equal(out.confidence, ref.confidence)
+    assert out.depth.shape == (12 * factor, 16 * factor)
+
+
+def test_upsampling_a_depth_below_the_smallest_size_is_a_shape_error():
+    """x16 of a 3x4 depth crashed in a pooling layer (noise.white_noise_sigma's 5x5 window on the low-resolution
+    depth); it is refused up front, naming the smallest depth that factor allows and what arrived."""
+    from torch_depth_sr.errors import ShapeError
+
+    with pytest.raises(ShapeError) as info:
+        restore_depth(np.ones((3, 4), np.float32) * 100, np.zeros((48, 64, 3), np.uint8))
+    msg = str(info.value)
+    assert "3x4" in msg and "x16" in msg and "at least 5x5" in msg and "noise_sigma" in msg
+    assert tuple(info.value.actual)[-2:] == (3, 4) and "5" in info.value.expected
+
+
+@pytest.mark.parametrize("factor", [2, 3, 16])
+def test_the_smallest_upsampling_size_is_exact(factor):
+    """The bound is exact: the smallest size min_upsampling_size names is upsampled, one pixel less is refused
+    (never a raw error), and with noise_sigma given (nothing estimated on the depth) smaller depth is upsampled."""
+    from torch_depth_sr._checks import min_upsampling_size
+    from torch_depth_sr.errors import ShapeError
+
+    least = min_upsampling_size(factor)
+    assert least == 5
+    d = _depth(least, least + 1)
+    out = restore_depth(d, _rgb(least * factor, (least + 1) * factor), **TINY)
+    assert out.shape == (least * factor, (least + 1) * factor) and np.isfinite(out).all()
+    with pytest.raises(ShapeError, match=f"at least {least}x{least}"):
+        restore_depth(d[: least - 1], _rgb((least - 1) * factor, (least + 1) * factor), **TINY)
+    small = min_upsampling_size(factor, noise_estimated=False)
+    out = restore_depth(_depth(small, small), _rgb(small * factor, small * factor), noise_sigma=1.0, **TINY)
+    assert out.shape == (small * factor, small * factor) and np.isfinite(out).all()
+
+
+def test_check_upsampling_size_names_the_bound_and_the_input():
+    from torch_depth_sr._checks import check_upsampling_size, min_upsampling_size
+    from torch_depth_sr.errors import ShapeError
+
+    assert [min_upsampling_size(f) for f in (1, 2, 4, 16, 32)] == [3, 5, 5, 5, 5]
+    assert [min_upsampling_size(f, noise_estimated=False) for f in (1, 2, 4)] == [3, 2, 1]
+    assert min_upsampling_size(2, block_size=21) == 11
+    check_upsampling_size(5, 9, 16)
+    check_upsampling_size(1, 1, 4, noise_estimated=False)
+    with pytest.raises(ShapeError, match="depth is 2x2; it must be at least 3x3, the block size") as info:
+        check_upsampling_size(2, 2, 1, shape=(1, 1, 2, 2))
+    assert info.value.actual == (1, 1, 2, 2)
+    with pytest.raises(ShapeError, match=r"depth is 3x4 \(output 48x64\); guided upsampling by x16 needs a depth "
+                                         r"of at least 5x5: its noise level") as info:
+        check_upsampling_size(3, 4, 16)
+    assert info.value.actual == (3, 4) and info.value.expected == "depth H, W >= 5 at x16"
+    with pytest.raises(ShapeError, match="at least 2x2: the output must hold one 3x3 block"):
+        check_upsampling_size(1, 9, 2, noise_estimated=False)
+

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from torch_depth_sr.datasets.synthetic import make_scene
-from torch_depth_sr.errors import DepthSRError
+from torch_depth_sr.errors import DepthSRError, ShapeError
 from torch_depth_sr.transforms import (
     AddFlyingPixels,
     AddGaussianNoise,
@@ -228,3 +228,74 @@ class TestRestoreDepth:
     def test_rejects_non_restorer(self):
         with pytest.raises(DepthSRError, match="DepthRestorer"):
             RestoreDepth(restorer=torch.nn.Identity())
+
+
+class TestOddInputs:
+    """Issue 26 item 10: no raw error from a transform; big-endian numpy gives the native result."""
+
+    @pytest.mark.parametrize("shape", [(), (8,), (0, 8), (1, 8, 0)])
+    @pytest.mark.parametrize("t", ALL, ids=IDS)
+    def test_depth_without_a_grid_is_a_shape_error(self, t, shape):
+        for sample in (torch.full(shape, 5.0), np.full(shape, 5, np.uint16), {"depth": torch.full(shape, 5.0)}):
+            with pytest.raises(ShapeError) as info:
+                t(sample)
+            actual, grid = tuple(info.value.actual), shape[-2:]
+            assert actual[len(actual) - len(grid):] == grid, actual
+
+    @pytest.mark.parametrize("shape", [(), (48,)])
+    @pytest.mark.parametrize("key", ["depth", "gt", "mask", "rgb"])
+    def test_crop_refuses_an_entry_without_two_dims(self, sample, key, shape):
+        with pytest.raises(ShapeError, match=rf"RandomCrop.*sample\['{key}'\] has shape \({'48,' if shape else ''}\)"
+                           ) as info:
+            RandomCrop(16)(dict(sample, **{key: torch.ones(shape)}))
+        assert info.value.actual == shape and "H,W" in info.value.expected
+        out = RandomCrop(16)(dict(sample, scale=torch.tensor(2.0), per_row=torch.ones(48)))  # extras pass through
+        assert out["scale"].shape == () and out["per_row"].shape == (48,)
+
+    def test_crop_cuts_numpy_colour_in_its_first_two_dims(self, sample):
+        hwc = sample["rgb"].permute(1, 2, 0).numpy()
+        out = RandomCrop((16, 24), seed=1)(dict(sample, rgb=hwc))
+        ref = RandomCrop((16, 24), seed=1)(sample)
+        assert out["rgb"].shape == (16, 24, 3)
+        np.testing.assert_array_equal(out["rgb"], ref["rgb"].permute(1, 2, 0).numpy())
+        assert torch.equal(out["depth"], ref["depth"])
+
+    def test_crop_larger_than_the_sample_is_a_shape_error(self, sample):
+        with pytest.raises(ShapeError, match="larger than the sample 48x64") as info:
+            RandomCrop((50, 10))(sample)
+        assert info.value.actual == (48, 64)
+
+    @pytest.mark.parametrize("t", ALL, ids=IDS)
+    def test_5d_depth_is_transformed_or_a_shape_error(self, t, sample):
+        d = sample["gt"][None, None].repeat(1, 2, 1, 1, 1)  # (1, 2, 1, 48, 64)
+        if isinstance(t, RestoreDepth):
+            with pytest.raises(ShapeError, match="got shape \\(1, 2, 1, 48, 64\\)"):
+                t({"depth": d})
+            return
+        out = t({"depth": d, "name": "a"})["depth"]
+        assert out.shape[:3] == (1, 2, 1)
+
+    @pytest.mark.parametrize("dtype", [">f4", ">u2"])
+    @pytest.mark.parametrize("t", _degradations() + [Compose([RandomCrop(32), RestoreDepth(**TINY)])],
+                             ids=IDS[:-1] + ["Restore"])
+    def test_big_endian_numpy_gives_the_native_result(self, t, dtype, sample):
+        d = (sample["gt"][0].numpy() * 10).astype(dtype)
+        rgb = (sample["rgb"].permute(1, 2, 0).numpy() * 255).round().astype(">u2") * 257  # 16-bit H×W×3
+        mask = sample["mask"][0].numpy().astype(">f4")
+        seeded = [x for x in getattr(t, "transforms", [t]) if hasattr(x, "seed")]
+        for x in seeded:
+            x.seed = 3
+        big = t({"depth": d, "rgb": rgb, "mask": mask, "name": "a"})
+        nat = t({"depth": d.astype(np.dtype(dtype).newbyteorder("=")), "rgb": rgb.astype(np.uint16),
+                 "mask": mask.astype(np.float32), "name": "a"})
+        assert big["depth"].dtype == np.dtype(dtype).newbyteorder("=") and big["depth"].dtype.isnative
+        np.testing.assert_array_equal(big["depth"], nat["depth"])
+
+    def test_restore_depth_reads_16_bit_colour(self, sample):
+        t = RestoreDepth(**TINY)
+        d = sample["gt"][0].numpy()
+        rgb8 = (sample["rgb"].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
+        out8 = t({"depth": d, "rgb": rgb8})["depth"]
+        out16 = t({"depth": d, "rgb": rgb8.astype(np.uint16) * 257})["depth"]  # was read as 257x too bright
+        np.testing.assert_allclose(out16, out8, atol=1e-4)
+

@@ -3,7 +3,9 @@
 Depth layouts: ``(H,W)``, ``(1,H,W)``, ``(B,1,H,W)``; dtypes float16/32/64, uint8, uint16, int32.
 0 or NaN means "no measurement". Colour: ``(B,3,H,W)``/``(3,H,W)`` float in [0,1] (torch or numpy),
 ``H×W×3`` (numpy, RGB order) uint8, uint16 or float in [0,1], or ``(B,1,H,W)``/``H×W`` greyscale.
-Numpy arrays may be big-endian or read-only (converted, never modified).
+Numpy arrays may be big-endian (``>f4`` from a PFM, ``>u2`` from a raw 16-bit PGM) or read-only: converted,
+never modified. A result comes back in native byte order with the input's kind and size (``>u2`` in, native
+``uint16`` out; the values are those of the native-order input, bit for bit).
 """
 from __future__ import annotations
 
@@ -61,6 +63,8 @@ def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch
         InvalidDepthError: negative or infinite depth, or a sample with no measured pixel.
     """
     orig_dtype = depth.dtype if isinstance(depth, (torch.Tensor, np.ndarray)) else None
+    if isinstance(depth, np.ndarray):  # the result goes back in native byte order (``>u2`` in, uint16 out)
+        orig_dtype = orig_dtype.newbyteorder("=")
     t, was_numpy = _as_tensor(depth, "depth")
     if t.dtype == torch.bool or t.is_complex():
         raise DTypeError(f"depth has dtype {t.dtype}; allowed are float16/32/64, uint8, uint16 or int32.")
@@ -179,7 +183,8 @@ def _check_rgb_range(t: torch.Tensor, is_int: bool, full_scale: float, orig_dtyp
 
 def restore_layout(x: torch.Tensor, layout: DepthLayout) -> Any:
     """Return ``x (B,1,H,W)`` in the user's layout, dtype, device and array type (NaN becomes 0 in an integer
-    dtype: "no measurement" in integer depth)."""
+    dtype: "no measurement" in integer depth). Numpy results are in native byte order: :func:`parse_depth` records
+    a big-endian ``>u2`` input as ``uint16``."""
     if layout.ndim == 2:
         x = x[0, 0]
     elif layout.ndim == 3:

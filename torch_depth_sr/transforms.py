@@ -12,7 +12,10 @@ A transform takes a whole **sample** and returns a new one:
 
 Conventions: depth is ``(H,W)``, ``(1,H,W)`` or a batch ``(B,1,H,W)``, torch or numpy, any dtype and
 any unit; ``0`` or NaN means "no measurement". Every transform returns new tensors (the input is
-never modified in place) of the input's dtype, device and container type.
+never modified in place) of the input's dtype, device and container type (numpy results in native byte
+order: a big-endian ``>u2`` depth comes back as ``uint16`` with the values of the native-order input).
+Depth, ground truth and mask with fewer than two dims, or an empty height or width, raise
+:class:`~torch_depth_sr.ShapeError`.
 
 **Randomness** is drawn once per call from torch's global generator (which a ``DataLoader``
 seeds differently in each worker), so ``torch.manual_seed(s)`` makes a sample reproducible; or
@@ -44,7 +47,7 @@ import torch
 import torch.nn.functional as F
 
 from ._checks import check_divisible
-from ._inputs import native_array
+from ._inputs import _integer_full_scale, native_array
 from .errors import DepthSRError, DTypeError, ShapeError
 
 if TYPE_CHECKING:
@@ -116,6 +119,9 @@ def _depth_float(d) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor, bool]:
     if t.dim() < 2:
         raise ShapeError(f"depth must be (H,W), (1,H,W) or (B,1,H,W); got shape {tuple(t.shape)}.",
                          actual=tuple(t.shape), expected="(H,W), (1,H,W) or (B,1,H,W)")
+    if t.shape[-2] == 0 or t.shape[-1] == 0:  # the window filters cannot reshape or pool an empty grid
+        raise ShapeError(f"depth is empty: shape {tuple(t.shape)}; its height and width must be at least 1.",
+                         actual=tuple(t.shape), expected="H, W >= 1")
     if t.dtype == torch.bool or t.is_complex():  # a bool map is a mask, not a depth (nothing to degrade)
         raise DTypeError(f"depth has dtype {t.dtype}; allowed are float, unsigned or signed integer depth. A bool "
                          "map is a validity mask: pass it as sample['mask'] next to the depth.")
@@ -237,7 +243,7 @@ class AddGaussianNoise(_DepthTransform):
         self.clamp_min, self.seed = float(clamp_min), seed
 
     def _params(self, d, g):
-        shape = _as_torch(d["depth"])[0].shape if "depth" in d else ()
+        shape = _as_torch(d["depth"])[0].shape if d.get("depth") is not None else ()
         return {"sigma": float(_uniform(*self.sigma, g)), "z": torch.randn(shape, generator=g, dtype=torch.float64)}
 
     def _degrade(self, f, measured, p):
@@ -304,7 +310,7 @@ class AddHoles(_DepthTransform):
         self.edge_threshold, self.edge_radius, self.seed = float(edge_threshold), int(edge_radius), seed
 
     def _params(self, d, g):
-        if "depth" not in d:
+        if d.get("depth") is None:
             return {}
         f, measured, _, _ = _depth_float(d["depth"])
         h, w = f.shape[-2:]
@@ -354,7 +360,7 @@ class AddFlyingPixels(_DepthTransform):
         self.edge_threshold, self.edge_radius, self.seed = float(edge_threshold), int(edge_radius), seed
 
     def _params(self, d, g):
-        if "depth" not in d:
+        if d.get("depth") is None:
             return {}
         f, measured, _, _ = _depth_float(d["depth"])
         band = _edge_band(f, measured, self.edge_threshold, self.edge_radius)
@@ -384,7 +390,7 @@ class AddImpulses(_DepthTransform):
         self.fraction, self.seed = _fraction(fraction, "fraction"), seed
 
     def _params(self, d, g):
-        if "depth" not in d:
+        if d.get("depth") is None:
             return {}
         f, _, _, _ = _depth_float(d["depth"])
         return {"where": _choose(torch.ones(f.shape, dtype=torch.bool), float(_uniform(*self.fraction, g)), g),
@@ -446,6 +452,9 @@ class RandomCrop(Transform):
     dims are a ``1/s`` fraction of it (low-resolution depth) are cropped at the matching place
     (the offsets are rounded to multiples of ``s``). Entries of any other size pass through.
 
+    Numpy colour may be ``H×W×3`` (as OpenCV and :func:`~torch_depth_sr.restore_depth` read it); it is cropped
+    in its first two dims. An understood entry with fewer than two dims raises :class:`~torch_depth_sr.ShapeError`.
+
     Args:
         size: ``int`` or ``(h, w)`` on the largest grid.
         seed: see the module docstring.
@@ -457,9 +466,19 @@ class RandomCrop(Transform):
             raise DepthSRError(f"size must be an int or (h, w) >= 1; got {size}.")
         self.size, self.seed = (int(size[0]), int(size[1])), seed
 
-    @staticmethod
-    def _grid(d: dict) -> Tuple[int, int]:
-        shapes = [tuple(_as_torch(d[k])[0].shape[-2:]) for k in ("rgb", "gt", "depth") if d.get(k) is not None]
+    # what each understood entry may be: at least (H, W), the two dims the crop cuts
+    _LAYOUTS = {"depth": "(H,W), (1,H,W) or (B,1,H,W)", "rgb": "(3,H,W), (B,3,H,W) or H×W×3 (numpy)",
+                "gt": "(H,W), (1,H,W) or (B,1,H,W)", "mask": "(H,W), (1,H,W) or (B,1,H,W), like the depth"}
+
+    @classmethod
+    def _grid(cls, d: dict) -> Tuple[int, int]:
+        for k, allowed in cls._LAYOUTS.items():
+            v = d.get(k)
+            if isinstance(v, (torch.Tensor, np.ndarray)) and v.ndim < 2:
+                raise ShapeError(f"RandomCrop crops the last two dims (H, W); sample['{k}'] has shape "
+                                 f"{tuple(v.shape)} ({v.ndim} dim{'s' if v.ndim != 1 else ''}). Allowed are {allowed}.",
+                                 actual=tuple(v.shape), expected=allowed)
+        shapes = [_hw(k, d[k]) for k in ("rgb", "gt", "depth") if d.get(k) is not None]
         if not shapes:
             raise DepthSRError("RandomCrop needs one of 'rgb', 'gt', 'depth' in the sample.")
         return max(shapes)
@@ -468,7 +487,8 @@ class RandomCrop(Transform):
         h, w = self._grid(d)
         ch, cw = self.size
         if ch > h or cw > w:
-            raise DepthSRError(f"crop {ch}x{cw} is larger than the sample {h}x{w}; use a smaller size.")
+            raise ShapeError(f"crop {ch}x{cw} is larger than the sample {h}x{w}; use a smaller size.",
+                             actual=(h, w), expected=f"H >= {ch} and W >= {cw}, the crop size")
         return {"grid": (h, w), "top": int(torch.randint(0, h - ch + 1, (), generator=g)),
                 "left": int(torch.randint(0, w - cw + 1, (), generator=g))}
 
@@ -478,7 +498,7 @@ class RandomCrop(Transform):
         for k, v in list(d.items()):
             if not isinstance(v, (torch.Tensor, np.ndarray)) or v.ndim < 2:
                 continue
-            vh, vw = v.shape[-2:]
+            vh, vw = _hw(k, v)
             if (vh, vw) == (h, w):
                 s = 1
             elif vh and h % vh == 0 and w % vw == 0 and h // vh == w // vw:
@@ -486,9 +506,23 @@ class RandomCrop(Transform):
             else:
                 continue
             top, left = p["top"] // s, p["left"] // s
-            crop = v[..., top: top + ch // s, left: left + cw // s]
-            d[k] = crop.copy() if isinstance(crop, np.ndarray) else crop.clone()
+            rows, cols = slice(top, top + ch // s), slice(left, left + cw // s)
+            crop = v[rows, cols] if _channels_last(k, v) else v[..., rows, cols]
+            # numpy: a native-order copy (a big-endian crop would stop torch's default_collate)
+            d[k] = np.array(crop, dtype=crop.dtype.newbyteorder("=")) if isinstance(crop, np.ndarray) else crop.clone()
         return d
+
+
+def _channels_last(key: str, v: Any) -> bool:
+    """Whether ``v`` is numpy colour ``H×W×3`` (the rule :class:`RestoreDepth` reads colour by)."""
+    return key == "rgb" and isinstance(v, np.ndarray) and v.ndim == 3 and v.shape[-1] == 3 and v.shape[0] != 3
+
+
+def _hw(key: str, v: Any) -> Tuple[int, int]:
+    """The height and width of a sample entry (a tensor or array of at least 2 dims)."""
+    if not isinstance(v, (torch.Tensor, np.ndarray)):
+        _as_torch(v)  # raises, naming the type
+    return tuple(v.shape[:2]) if _channels_last(key, v) else tuple(v.shape[-2:])
 
 
 # ---- restoration -----------------------------------------------------------------------------
@@ -547,8 +581,8 @@ class RestoreDepth(Transform):
             rgb = _as_torch(rgb)[0]
             if rgb.dim() == 3 and rgb.shape[-1] == 3 and rgb.shape[0] != 3:  # H×W×3 (numpy uint8 style)
                 rgb = rgb.permute(2, 0, 1)
-            if not rgb.is_floating_point():
-                rgb = rgb.float() / 255.0
+            if not rgb.is_floating_point():  # 8-bit colour by 255, 16-bit (uint16) by 65535
+                rgb = rgb.float() / _integer_full_scale(rgb)
             rgb = rgb.to(self.device)
         from .model import restore_depth  # the model imports nothing from here; lazily, as in __init__
 

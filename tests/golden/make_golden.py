@@ -1,0 +1,109 @@
+"""Generator of the golden outputs in this folder (``inputs.pt``, ``outputs.pt``), read by ``tests/test_golden.py``.
+
+It was run ONCE, with the code at commit 046c797 (before issue 26's refactor of the model's internals and config),
+on the CPU, as
+
+    OMP_NUM_THREADS=1 python tests/golden/make_golden.py
+
+Do NOT re-run it to "fix" a failing ``test_golden.py``: the stored outputs are the numbers of the code before the
+refactor, and a refactor that changes them has changed the results (issue 26: "every output, gradient and benchmark
+figure stays bit for bit what it is"). Re-run it only when a change of the numbers is intended, reviewed and stated
+(then say so in the commit message, with the commit the new goldens were made at).
+
+It uses the API of 046c797: named configurations by ``DepthRestorer.ablation(name)`` (``paper``, ``tv``, ``tv+nl``)
+and ``DepthRestorer.preset("fast")``; the test builds them with ``DepthRestorer.from_preset(name)``.
+
+Inputs (tiny, deterministic; stored so that the test does not depend on the scene generator): one synthetic scene
+(``make_scene(32, 40, seed=7)``), its colour image at 32x40 (the output size of every task); denoising: Gaussian noise
+sigma = 3, two holes, five impulses and five flying pixels; guided upsampling x2 and x4: the ground truth area-averaged
+(``area``) or antialiased-bicubic resized (``bicubic``), Gaussian noise sigma = 3, one hole of two pixels (x2).
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+
+HERE = Path(__file__).resolve().parent
+NAMED = ("default", "fast", "paper", "tv", "tv+nl")
+SHIPPED = ("denoise", "denoise-guided", "denoise-refined", "upsample", "upsample-area", "upsample-x4",
+           "upsample-x4-refined")
+BICUBIC_MODELS = ("upsample", "upsample-x4", "upsample-x4-refined")  # also on bicubic-downsampled input
+
+
+def make_inputs() -> dict:
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(32, 40, seed=7)
+    gt, rgb = s["gt"][None].float(), s["rgb"][None].float()  # (1,1,32,40), (1,3,32,40)
+    g = torch.Generator().manual_seed(26)
+    out = {"rgb": rgb, "gt": gt}
+    y = gt + 3.0 * torch.randn(gt.shape, generator=g)
+    y[..., 6:9, 10:14] = 0  # holes
+    y[..., 22:24, 30:33] = 0
+    for r, c, d in ((4, 4, 35.0), (12, 27, -30.0), (18, 8, 40.0), (27, 17, -35.0), (29, 36, 30.0)):  # impulses
+        y[..., r, c] += d
+    jump = (gt[..., :, 2:] - gt[..., :, :-2]).abs() > 20  # flying pixels: the mean of both sides of a depth edge
+    for r, c in jump[0, 0].nonzero()[::5][:5].tolist():
+        y[..., r, c + 1] = 0.5 * (gt[..., r, c] + gt[..., r, c + 2])
+    out["denoise"] = y.clamp_min(0)
+    for f in (2, 4):
+        for deg in ("area", "bicubic"):
+            lr = (F.avg_pool2d(gt, f) if deg == "area" else
+                  F.interpolate(gt, size=(32 // f, 40 // f), mode="bicubic", antialias=True, align_corners=False))
+            y = lr + 3.0 * torch.randn(lr.shape, generator=g)
+            if f == 2:
+                y[..., 5, 6:8] = 0
+            out[f"x{f}/{deg}"] = y.clamp_min(0)
+    return out
+
+
+def cases() -> list[tuple[str, str, str]]:
+    """(kind, name, task): every named configuration and shipped model on denoising and x2 / x4 area upsampling,
+    and the bicubic-trained ones on bicubic x2 / x4 too."""
+    out = []
+    for kind, names in (("named", NAMED), ("shipped", SHIPPED)):
+        for name in names:
+            for task in ("denoise", "x2/area", "x4/area"):
+                out.append((kind, name, task))
+            if name in BICUBIC_MODELS:
+                out += [(kind, name, "x2/bicubic"), (kind, name, "x4/bicubic")]
+    return out
+
+
+def _build_at_046c797(kind: str, name: str):
+    from torch_depth_sr import DepthRestorer
+
+    if kind == "shipped":
+        return DepthRestorer.from_pretrained(name)
+    if name == "default":
+        return DepthRestorer()
+    if name == "fast":
+        return DepthRestorer.preset("fast")
+    return DepthRestorer.ablation(name)
+
+
+def main() -> None:
+    import torch_depth_sr
+
+    print("package:", torch_depth_sr.__file__, "torch", torch.__version__, file=sys.stderr)
+    torch.set_num_threads(1)
+    inputs = make_inputs()
+    outputs = {}
+    for kind, name, task in cases():
+        model = _build_at_046c797(kind, name)
+        r = model.restore_with_details(inputs[task], inputs["rgb"])
+        key = f"{kind}/{name}/{task}"
+        outputs[f"{key}/depth"] = r.depth.detach().clone()
+        if task == "denoise":
+            outputs[f"{key}/confidence"] = r.confidence.detach().clone()
+        print(key, file=sys.stderr)
+    torch.save(inputs, HERE / "inputs.pt")
+    torch.save(outputs, HERE / "outputs.pt")
+    print(f"{len(cases())} cases, {len(outputs)} tensors", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,111 @@
+"""Per-sequence restorers: objects with ``.step(depth, rgb) -> restored depth`` and ``.reset()``.
+
+:func:`~torch_depth_sr.recordings.restore_dataset` takes a *factory* (``restorer=``), a callable with no arguments
+that returns such an object. It is called once per process (each worker of ``workers=N``, each ``torchrun`` rank)
+and the object is ``reset()`` before every sequence, then stepped through that sequence's frames in order:
+
+* ``depth``: the stored map as a numpy ``(H, W)`` array in native byte order (uint8/uint16/float; 0 or NaN = no
+  measurement), ``rgb``: a float32 ``(3, H', W')`` tensor in [0, 1], or None for a depth-only recording;
+* it returns the restored map in the input's layout, dtype and units (what ``restore_depth`` returns).
+
+An object whose ``stateful`` attribute is False (e.g. :class:`FrameByFrame`) declares that a frame's result does not
+depend on the frames before it; a resumed sequence then skips its finished frames instead of replaying them.
+The factory must be picklable for ``workers > 1`` (a module-level function or class instance, not a lambda).
+"""
+from __future__ import annotations
+
+import os
+from typing import TYPE_CHECKING, Any, Optional, Protocol
+
+import torch
+
+from ..errors import UsageError
+
+if TYPE_CHECKING:
+    from ..model import DepthRestorer
+
+__all__ = ["Restorer", "FrameByFrame", "PretrainedRestorer"]
+
+
+class Restorer(Protocol):
+    def step(self, depth: Any, rgb: Optional[torch.Tensor]) -> Any: ...
+
+    def reset(self) -> None: ...
+
+
+class FrameByFrame:
+    """Each frame on its own with ``restore_depth(depth, rgb, model=model)``: no state between frames.
+
+    Args:
+        model: a :class:`~torch_depth_sr.DepthRestorer`.
+        **kwargs: passed to :func:`~torch_depth_sr.restore_depth` (``scale_factor``, ``fill``, ``noise_sigma``).
+    """
+
+    stateful = False
+
+    def __init__(self, model: "DepthRestorer", **kwargs: Any):
+        self.model, self.kwargs = model, kwargs
+        p = next(iter(model.parameters()), None)
+        if p is None:
+            p = next(iter(model.buffers()), None)
+        self.device = p.device if p is not None else torch.device("cpu")
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, depth: Any, rgb: Optional[torch.Tensor]) -> Any:
+        from ..model import restore_depth
+
+        if rgb is not None:
+            rgb = rgb[None].to(self.device)
+        with torch.no_grad():
+            return restore_depth(depth, rgb, model=self.model, **self.kwargs)
+
+
+class PretrainedRestorer:
+    """Factory of :class:`FrameByFrame` restorers running ``DepthRestorer.from_pretrained(name)`` (``None``: the
+    default ``DepthRestorer()``) on ``device``; picklable, so it can travel to worker processes.
+
+    ``device="cuda"`` under ``torchrun`` means ``cuda:$LOCAL_RANK`` (one GPU per rank).
+    """
+
+    def __init__(self, name: Optional[str] = None, device: str = "cpu", **kwargs: Any):
+        self.name, self.device, self.kwargs = name, device, kwargs
+        self._model = None
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "_model": None}  # each process loads its own
+
+    def load_model(self) -> "DepthRestorer":
+        """The model (loaded once per process); :class:`UsageError` for an unknown name."""
+        if self._model is None:
+            from ..model import DepthRestorer
+
+            if self.name is None:
+                model = DepthRestorer()
+            else:
+                try:
+                    model = DepthRestorer.from_pretrained(self.name)
+                except UsageError:
+                    raise
+                except ValueError as e:
+                    from ..errors import ModelFileError
+
+                    if isinstance(e, ModelFileError):
+                        raise
+                    raise UsageError(f"--pretrained {self.name!r}: {e}") from e
+            self._model = model.to(_rank_device(self.device))  # as `restore` runs it
+        return self._model
+
+    def __call__(self) -> FrameByFrame:
+        return FrameByFrame(self.load_model(), **self.kwargs)
+
+    def __repr__(self) -> str:
+        return f"PretrainedRestorer({self.name!r}, device={self.device!r})"
+
+
+def _rank_device(device: str) -> torch.device:
+    dev = torch.device(device)
+    if dev.type == "cuda" and dev.index is None and "LOCAL_RANK" in os.environ:
+        return torch.device("cuda", int(os.environ["LOCAL_RANK"]))
+    return dev
