@@ -14,13 +14,13 @@ import pytest
 import torch
 
 from torch_depth_sr import DepthRestorer, RestorerConfig, restore_depth
-from torch_depth_sr.config import ABLATIONS, PRESETS
+from torch_depth_sr.config import PRESETS, apply_overrides
 from torch_depth_sr.errors import DepthSRError, DTypeError, InvalidDepthError, ModelFileError, ParameterError
 from torch_depth_sr.solvers import cg_solve
 from torch_depth_sr.operators import laplacian
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = dict(num_layers=2, search_window=7, k=4)
+TINY = dict(num_layers=2, block_matching={"search_window": 7, "k": 4})
 
 
 def _depth(h=24, w=32, seed=0) -> np.ndarray:
@@ -40,49 +40,72 @@ def _run_child(code: str, env_extra: dict | None = None) -> subprocess.Completed
 
 # ---- item 4: parameters --------------------------------------------------------------------------
 BAD_FIELDS = [
-    ("num_layers", 0), ("num_layers", 2.5), ("num_layers", True),
-    ("lam", -1.0), ("lam", 0.0), ("lam", float("nan")), ("lam", "one"), ("eta", -2.0), ("gamma", float("inf")),
-    ("mu1", 0), ("mu2", -0.5), ("guided_prior", -1.0), ("guided_prior", float("nan")),
-    ("isotropic", "yes"), ("init_fill", "bilateral"), ("upsample_init", "nearest"), ("init_kernel_size", 0),
-    ("init_sigma_space", 0.0), ("init_sigma_color", -1.0), ("upsample_jbu", {"radius": -1}),
-    ("upsample_jbu", {"size": 3}), ("upsample_scale", {"tau": 2.0}), ("block_size", 4), ("block_size", 0),
-    ("search_window", 8), ("k", 0), ("k", 2.5), ("k", 1000), ("color_weight", -1.0), ("temperature", 0.0),
-    ("match_layers", 3), ("match_layers", (1, -1)), ("match_layers", ("2",)), ("singular_tau", 0.0),
-    ("singular_tau", 1.5), ("singular_sigma_floor", 0.0), ("singular_rounds", 0), ("singular_gate", -0.1),
-    ("singular_gate", 2.0), ("cg_tol", 0.0), ("cg_tol", -1e-3), ("cg_max_iter", 0), ("precondition", 1),
-    ("extra", None),
+    ("num_layers", 0), ("num_layers", 2.5), ("num_layers", True), ("degradation", "nearest"), ("terms", ("tv",)),
+    ("terms", ("nonlocal", "nonlocal")), ("edge_snap", "on"),
+    ("weights.lam", -1.0), ("weights.lam", 0.0), ("weights.lam", float("nan")), ("weights.lam", "one"),
+    ("weights.eta", -2.0), ("weights.gamma", float("inf")), ("weights.mu1", 0), ("weights.mu2", -0.5),
+    ("guided_prior.weight", -1.0), ("guided_prior.weight", float("nan")), ("weights.isotropic", "yes"),
+    ("initial.fill", "bilateral"), ("upsampling.init", "nearest"), ("initial.kernel_size", 0),
+    ("initial.sigma_space", 0.0), ("initial.sigma_color", -1.0), ("upsampling.jbu.radius", -1),
+    ("upsampling.jbu", {"size": 3}), ("upsampling.multipliers", {"tau": 2.0}), ("block_matching.block_size", 4),
+    ("block_matching.block_size", 0), ("block_matching.search_window", 8), ("block_matching.k", 0),
+    ("block_matching.k", 2.5), ("block_matching.k", 1000), ("block_matching.color_weight", -1.0),
+    ("block_matching.temperature", 0.0), ("block_matching.match_layers", 3), ("block_matching.match_layers", (1, -1)),
+    ("block_matching.match_layers", ("2",)), ("singular.tau", 0.0), ("singular.tau", 1.5),
+    ("singular.sigma_floor", 0.0), ("singular.rounds", 0), ("singular.gate", -0.1), ("singular.gate", 2.0),
+    ("solver.tol", 0.0), ("solver.tol", -1e-3), ("solver.max_iter", 0), ("solver.precondition", 1),
+    ("edge_snap.rounds", 0), ("value_prior.range", 0.0), ("fidelity.width", 0.0),
 ]
+
+
+def _nested(path: str, value):
+    """``{"a": {"b": value}}`` for ``"a.b"``: the form DepthRestorer's overrides take."""
+    head, *rest = path.split(".")
+    for key in reversed(rest):
+        value = {key: value}
+    return {head: value}
 
 
 @pytest.mark.parametrize("field,value", BAD_FIELDS, ids=[f"{f}={v!r}" for f, v in BAD_FIELDS])
 def test_config_field_out_of_domain_is_refused(field, value):
     with pytest.raises(ParameterError) as err:
-        RestorerConfig(**{field: value})
+        RestorerConfig().replace(**_nested(field, value))
     msg = str(err.value)
     assert msg.startswith(field) and "must be" in msg and "got" in msg
     assert err.value.name == field
-    with pytest.raises(ParameterError):  # the same check guards the model's overrides
-        DepthRestorer(**{field: value})
+    with pytest.raises(ParameterError):  # the same check guards the model's overrides and the JSON forms
+        DepthRestorer(**_nested(field, value))
+    with pytest.raises(ParameterError):
+        apply_overrides(RestorerConfig(), {field: value})
 
 
-def test_every_config_field_has_a_domain():
+def test_every_setting_has_a_domain():
     import dataclasses
 
-    from torch_depth_sr.config import _FIELD_CHECKS
+    from torch_depth_sr.config.groups import Group
+    from torch_depth_sr.config.restorer import _GROUPS
 
-    unchecked = {f.name for f in dataclasses.fields(RestorerConfig)} - set(_FIELD_CHECKS)
-    assert not unchecked, f"add a domain to config._FIELD_CHECKS for {sorted(unchecked)}"
+    unchecked = []
+    for kind in _GROUPS.values():
+        for f in dataclasses.fields(kind):
+            if f.name not in kind._CHECKS and f.name not in kind._NESTED and f.name != "quantiles":
+                unchecked.append(f"{kind._NAME}.{f.name}")
+    assert not unchecked, f"add a domain to the group's _CHECKS for {unchecked}"
+    assert all(issubclass(k, Group) for k in _GROUPS.values())
 
 
 def test_valid_configs_still_construct():
     RestorerConfig()
-    RestorerConfig(**TINY)
-    RestorerConfig(guided_prior=0.0, color_weight=0.0, singular_gate=0.0, match_layers=[], upsample_scale={})
-    for overrides in list(ABLATIONS.values()) + list(PRESETS.values()):
-        RestorerConfig(**overrides)
+    RestorerConfig().replace(**TINY)
+    RestorerConfig(guided_prior=None, singular={"gate": None}, upsampling={"multipliers": {}},
+                   block_matching={"color_weight": 0.0, "match_layers": []})
+    for changes in PRESETS.values():
+        RestorerConfig().replace(**changes)
     for f in (ROOT / "torch_depth_sr" / "pretrained").glob("*/config.json"):
         RestorerConfig.from_dict(json.loads(f.read_text()))
-    assert RestorerConfig(k=np.int64(4), lam=np.float32(1.5), match_layers=[1]).match_layers == (1,)
+    c = RestorerConfig().replace(block_matching={"k": np.int64(4), "match_layers": [1]},
+                                 weights={"lam": np.float32(1.5)})
+    assert c.block_matching.match_layers == (1,)
 
 
 @pytest.mark.parametrize("sigma", [float("nan"), float("inf"), -1.0, 0.0, "1", [1.0, 2.0, 3.0], [[1.0]] * 3,
@@ -110,7 +133,7 @@ def test_scale_factor_must_be_a_positive_int(factor):
 @pytest.mark.parametrize("implicit", [False, True])
 def test_flat_crop_trains(implicit):
     torch.manual_seed(0)
-    model = DepthRestorer(trainable=True, implicit_backward=implicit, **TINY)
+    model = DepthRestorer(trainable=True, solver={"implicit_backward": implicit}, **TINY)
     depth = torch.full((2, 1, 24, 32), 100.0)
     out = model(depth, torch.rand(2, 3, 24, 32))
     assert out.requires_grad
@@ -147,7 +170,7 @@ def saved(tmp_path) -> Path:
 
 def test_round_trip_still_loads(saved):
     m = DepthRestorer.load(saved)
-    assert m.config.num_layers == 2 and m.config.match_layers == (2, 5)
+    assert m.config.num_layers == 2 and m.config.block_matching.match_layers == (2, 5)
 
 
 class _NotATensor:
@@ -181,16 +204,18 @@ def test_truncated_state_dict_is_named(saved):
         DepthRestorer.load(saved)
 
 
-@pytest.mark.parametrize("field,value", [("lam", "one"), ("k", 2.5), ("match_layers", 3), ("num_layers", None),
-                                         ("use_nonlocal", "false"), ("bogus", 1)])
+@pytest.mark.parametrize("field,value", [("weights.lam", "one"), ("block_matching.k", 2.5),
+                                         ("block_matching.match_layers", 3), ("num_layers", None),
+                                         ("terms", "nonlocal"), ("bogus", 1), ("weights.bogus", 1)])
 def test_mistyped_config_field_is_named(saved, field, value):
     f = saved / "config.json"
     d = json.loads(f.read_text())
-    d[field] = value
+    group, _, name = field.rpartition(".")
+    (d[group] if group else d)[name] = value
     f.write_text(json.dumps(d))
     with pytest.raises(ModelFileError) as err:
         DepthRestorer.load(saved)
-    assert str(f) in str(err.value) and field in str(err.value)
+    assert str(f) in str(err.value) and (group or field) in str(err.value)
 
 
 def test_invalid_json_names_file_and_position(saved):
@@ -286,7 +311,7 @@ def test_no_torch_warnings_for_read_only_arrays_or_colour_requiring_grad():
         warnings.simplefilter("error")
         from torch_depth_sr import restore_depth
         from torch_depth_sr.transforms import AddGaussianNoise
-        S = dict(num_layers=2, search_window=7, k=4)
+        S = dict(num_layers=2, block_matching={"search_window": 7, "k": 4})
         d = (100 + 5 * np.random.default_rng(0).random((24, 32))).astype(np.float32)
         rgb = (np.random.default_rng(1).random((24, 32, 3)) * 255).astype(np.uint8)
         m = np.ones((24, 32), np.uint8)
@@ -353,53 +378,21 @@ def test_big_endian_depth_colour_and_mask_give_the_native_output_bit_for_bit(dty
     assert out.depth.shape == (12 * factor, 16 * factor)
 
 
-def test_upsampling_a_depth_below_the_smallest_size_is_a_shape_error():
+@pytest.mark.parametrize("factor", [2, 3, 4, 16])
+def test_a_small_depth_is_upsampled(factor):
     """x16 of a 3x4 depth crashed in a pooling layer (noise.white_noise_sigma's 5x5 window on the low-resolution
-    depth); it is refused up front, naming the smallest depth that factor allows and what arrived."""
+    depth): the white-noise estimate now falls back, as its docstring says, to the second-difference estimate when
+    the depth has too few 5x5 patches, so any depth the block size allows is upsampled."""
+    for h, w in ((3, 4), (2, 2), (4, 4)):
+        out = restore_depth(np.linspace(90, 110, h * w, dtype=np.float32).reshape(h, w), _rgb(h * factor, w * factor),
+                            **TINY)
+        assert out.shape == (h * factor, w * factor) and np.isfinite(out).all()
+
+
+def test_below_the_block_size_is_a_shape_error():
     from torch_depth_sr.errors import ShapeError
 
-    with pytest.raises(ShapeError) as info:
-        restore_depth(np.ones((3, 4), np.float32) * 100, np.zeros((48, 64, 3), np.uint8))
-    msg = str(info.value)
-    assert "3x4" in msg and "x16" in msg and "at least 5x5" in msg and "noise_sigma" in msg
-    assert tuple(info.value.actual)[-2:] == (3, 4) and "5" in info.value.expected
-
-
-@pytest.mark.parametrize("factor", [2, 3, 16])
-def test_the_smallest_upsampling_size_is_exact(factor):
-    """The bound is exact: the smallest size min_upsampling_size names is upsampled, one pixel less is refused
-    (never a raw error), and with noise_sigma given (nothing estimated on the depth) smaller depth is upsampled."""
-    from torch_depth_sr._checks import min_upsampling_size
-    from torch_depth_sr.errors import ShapeError
-
-    least = min_upsampling_size(factor)
-    assert least == 5
-    d = _depth(least, least + 1)
-    out = restore_depth(d, _rgb(least * factor, (least + 1) * factor), **TINY)
-    assert out.shape == (least * factor, (least + 1) * factor) and np.isfinite(out).all()
-    with pytest.raises(ShapeError, match=f"at least {least}x{least}"):
-        restore_depth(d[: least - 1], _rgb((least - 1) * factor, (least + 1) * factor), **TINY)
-    small = min_upsampling_size(factor, noise_estimated=False)
-    out = restore_depth(_depth(small, small), _rgb(small * factor, small * factor), noise_sigma=1.0, **TINY)
-    assert out.shape == (small * factor, small * factor) and np.isfinite(out).all()
-
-
-def test_check_upsampling_size_names_the_bound_and_the_input():
-    from torch_depth_sr._checks import check_upsampling_size, min_upsampling_size
-    from torch_depth_sr.errors import ShapeError
-
-    assert [min_upsampling_size(f) for f in (1, 2, 4, 16, 32)] == [3, 5, 5, 5, 5]
-    assert [min_upsampling_size(f, noise_estimated=False) for f in (1, 2, 4)] == [3, 2, 1]
-    assert min_upsampling_size(2, block_size=21) == 11
-    check_upsampling_size(5, 9, 16)
-    check_upsampling_size(1, 1, 4, noise_estimated=False)
-    with pytest.raises(ShapeError, match="depth is 2x2; it must be at least 3x3, the block size") as info:
-        check_upsampling_size(2, 2, 1, shape=(1, 1, 2, 2))
-    assert info.value.actual == (1, 1, 2, 2)
-    with pytest.raises(ShapeError, match=r"depth is 3x4 \(output 48x64\); guided upsampling by x16 needs a depth "
-                                         r"of at least 5x5: its noise level") as info:
-        check_upsampling_size(3, 4, 16)
-    assert info.value.actual == (3, 4) and info.value.expected == "depth H, W >= 5 at x16"
-    with pytest.raises(ShapeError, match="at least 2x2: the output must hold one 3x3 block"):
-        check_upsampling_size(1, 9, 2, noise_estimated=False)
-
+    with pytest.raises(ShapeError, match="depth is 1x2 \\(output 1x2\\); it must be at least 3x3"):
+        restore_depth(np.ones((1, 2), np.float32), None, **TINY)
+    with pytest.raises(ShapeError, match="output 2x4"):
+        restore_depth(np.ones((1, 2), np.float32), _rgb(2, 4), **TINY)

@@ -62,8 +62,7 @@ def test_untrained_refiner_is_the_clamp_and_keeps_the_input():
 def test_model_runs_the_refiner_only_when_upsampling(tmp_path):
     s = make_scene(64, 80, seed=3)
     plain = DepthRestorer(degradation="bicubic", num_layers=2).eval()
-    refined = DepthRestorer(degradation="bicubic", num_layers=2, refine_net=True, refine_channels=8,
-                            refine_layers=1).eval()
+    refined = DepthRestorer(degradation="bicubic", num_layers=2, refiner={"channels": 8, "layers": 1}).eval()
     refined.load_state_dict({**plain.state_dict(), **{f"refiner.{k}": v for k, v in
                                                       _random_refiner(4, 8, 1).state_dict().items()}})
     noisy = (s["gt"] + 3 * torch.randn_like(s["gt"])).clamp_min(1)[None]
@@ -82,8 +81,8 @@ def test_model_runs_the_refiner_only_when_upsampling(tmp_path):
 
 def _with_random_refiner(task: str) -> tuple[DepthRestorer, DepthRestorer]:
     plain = DepthRestorer(degradation="bicubic", num_layers=2).eval()
-    refined = DepthRestorer(degradation="bicubic", num_layers=2, refine_net=True, refine_channels=8,
-                            refine_layers=1, refine_task=task).eval()
+    refined = DepthRestorer(degradation="bicubic", num_layers=2,
+                            refiner={"channels": 8, "layers": 1, "task": task}).eval()
     refiner = _random_refiner(4, 8, 1)
     refined.load_state_dict({**plain.state_dict(), **{f"refiner.{k}": v for k, v in refiner.state_dict().items()}})
     return plain, refined
@@ -104,7 +103,7 @@ def test_a_denoising_refiner_runs_only_when_denoising_and_keeps_the_band(tmp_pat
     assert not torch.allclose(a.depth, b.depth)
     # the fidelity band still holds every trusted measurement, whatever the network says
     sigma, scale = torch.tensor(b.info["noise_sigma"]), torch.tensor(b.info["scale"])
-    band = float(noise_band(torch.zeros(1), sigma / scale, refined.fidelity_band)) * float(scale)
+    band = float(noise_band(torch.zeros(1), sigma / scale, refined.config.fidelity.width)) * float(scale)
     trusted = b.trusted > 0
     assert float((b.depth - noisy[None])[trusted].abs().max()) <= band * (1 + 1e-4)
     # and it keeps to the range of the trusted values (and the model's fill) around each pixel: nothing new. The
@@ -119,14 +118,14 @@ def test_a_denoising_refiner_runs_only_when_denoising_and_keeps_the_band(tmp_pat
     assert float((lo - b.depth).max()) <= tol and float((b.depth - hi).max()) <= tol
     assert float((b.depth - a.depth).abs().max()) > 10 * tol  # the network does act inside the bounds
     refined.save(tmp_path / "m")
-    assert DepthRestorer.load(tmp_path / "m").config.refine_task == "denoise"
+    assert DepthRestorer.load(tmp_path / "m").config.refiner.task == "denoise"
 
 
 def test_refine_task_is_checked():
     from torch_depth_sr import ParameterError
 
-    with pytest.raises(ParameterError, match="refine_task"):
-        DepthRestorer(refine_net=True, refine_task="deblur")
+    with pytest.raises(ParameterError, match="refiner.task"):
+        DepthRestorer(refiner={"task": "deblur"})
 
 
 def test_bicubic_downsample_is_the_protocol_resize_and_ignores_holes():
@@ -268,7 +267,7 @@ def test_shipped_denoise_refiner_does_no_harm_and_helps_on_a_held_out_crop():
     depth = cv2.imread(str(art / "disp1.png"), cv2.IMREAD_UNCHANGED)[100:260, 150:350]
     rgb = cv2.imread(str(art / "view1.png"))[100:260, 150:350, ::-1].copy()
     refined = DepthRestorer.from_pretrained("denoise-refined").eval()
-    assert refined.refiner is not None and refined.config.refine_task == "denoise"
+    assert refined.refiner is not None and refined.config.refiner.task == "denoise"
     out = restore_depth(depth, rgb, model=refined)
     np.testing.assert_array_equal(out[depth > 0], depth[depth > 0])
     alone = DepthRestorer.from_pretrained("denoise-guided").eval()
@@ -300,7 +299,7 @@ def test_shipped_area_upsampler_beats_the_frozen_model_on_noisy_area_downsampled
     rgb = torch.from_numpy(bgr[..., ::-1].copy()).permute(2, 0, 1)[None].float() / 255
     low = Downsample(4, "area")({"depth": gt})["depth"]
     refined = DepthRestorer.from_pretrained("upsample-area").eval()
-    frozen = DepthRestorer(refined.config.replace(refine_net=False)).eval()
+    frozen = DepthRestorer(refined.config.replace(refiner=None)).eval()
     known = gt > 0
     for sigma in (2.0, 0.0):
         noise = sigma * torch.randn(low.shape, generator=torch.Generator().manual_seed(0))

@@ -18,7 +18,7 @@ from torch_depth_sr.transforms import (
     RestoreDepth,
 )
 
-TINY = dict(num_layers=2, search_window=7, k=4)
+TINY = dict(num_layers=2, block_matching={"search_window": 7, "k": 4})
 
 
 @pytest.fixture(scope="module")

@@ -20,19 +20,24 @@ def test_weights_only_where_the_matched_values_agree():
     torch.testing.assert_close(diag, torch.tensor([[[[10.0, 10.0, 10.0, 0.0]]]]))
 
 
+def _value_prior(weight: float):
+    """The value prior group with η₃ = ``weight`` (0 = off)."""
+    return {"weight": weight} if weight > 0 else None
+
+
 def test_value_prior_lowers_the_error_on_noisy_surfaces():
     s = make_scene(64, 80, seed=5)
     g = torch.Generator().manual_seed(0)
     y = (s["gt"] + 5 * torch.randn(s["gt"].shape, generator=g)).clamp_min(1)[None]
     gt, valid = s["gt"][None], s["mask"][None] > 0
-    err = {w: float((DepthRestorer(nl_value_weight=w)(y, s["rgb"][None]) - gt)[valid].square().mean().sqrt())
+    err = {w: float((DepthRestorer(value_prior=_value_prior(w))(y, s["rgb"][None]) - gt)[valid].square().mean().sqrt())
            for w in (0.0, 10.0)}
     assert err[10.0] < err[0.0], err
 
 
 def test_value_prior_does_not_shift_a_noisy_slope():
     """Matched centres on one side of a pixel (image borders, slopes) bias a plain mean x̄ on a slope; x̄ taken from
-    a plane fitted to the centres (``nl_value_ridge > 0``, the default) is unbiased there.
+    a plane fitted to the centres (``value_prior.ridge > 0``, the default) is unbiased there.
 
     A 16×20 noisy ramp (0→40 across 20 columns, uniform noise of std 8.7). Measured over 40 noise seeds (the bounds
     below hold all of them):
@@ -44,8 +49,8 @@ def test_value_prior_does_not_shift_a_noisy_slope():
       against 3.1 without the prior, so the whole-image RMSE is 1.16× that without it on average (up to 1.43×).
       A known limitation, pinned here (no worse than measured), not endorsed.
 
-    With the plain mean (``nl_value_ridge=0``) the same seeds come out 1.7–2.2× worse inside and 1.6–2.1× overall,
-    the ends gap up to 13.8: the inside bound fails on each of them. The centroid gate (``nl_value_offset``) changes
+    With the plain mean (``value_prior.ridge=0``) the same seeds come out 1.7–2.2× worse inside and 1.6–2.1× overall,
+    the ends gap up to 13.8: the inside bound fails on each of them. The centroid gate (``value_prior.offset``) changes
     nothing on this ramp.
     """
     import numpy as np
@@ -58,7 +63,7 @@ def test_value_prior_does_not_shift_a_noisy_slope():
     inner_ratios = []
     for seed in range(3):
         a = (20 + 30 * np.random.default_rng(seed).random((h, w)) + np.linspace(0, 40, w)[None]).astype(np.float32)
-        out = {weight: restore_depth(a, nl_value_weight=weight).astype(np.float64) for weight in (0.0, 10.0)}
+        out = {weight: restore_depth(a, value_prior=_value_prior(weight)).astype(np.float64) for weight in (0.0, 10.0)}
         err = {weight: o - truth for weight, o in out.items()}
         assert abs(out[0.0].mean() - a.mean()) < 1e-2  # the reference: the model without the prior keeps the mean
         assert abs(out[10.0].mean() - a.mean()) < 1.5, seed  # no shift (measured: at most 0.94)

@@ -10,12 +10,8 @@ import torch
 from .errors import DTypeError, ParameterError, ShapeError
 
 __all__ = ["check_4d", "check_same_hw", "check_same_shape", "check_per_sample", "check_divisible", "check_floating",
-           "check_min_size", "check_noise_sigma", "check_scale_factor", "check_upsampling_size",
-           "min_upsampling_size", "WHITE_NOISE_PATCH"]
+           "check_min_size", "check_noise_sigma", "check_scale_factor"]
 
-# noise.white_noise_sigma's default patch: guided upsampling that estimates the white-noise level of the
-# low-resolution depth itself (no noise_sigma given) max-pools it with this window, so it needs a depth this large
-WHITE_NOISE_PATCH = 5
 
 
 def check_4d(x: torch.Tensor, name: str, channels: int | Sequence[int] | None = None) -> None:
@@ -83,71 +79,6 @@ def check_min_size(x: torch.Tensor, name: str, min_hw: int, why: str) -> None:
     if h < min_hw or w < min_hw:
         raise ShapeError(f"{name} is {h}x{w}; it must be at least {min_hw}x{min_hw} ({why}).",
                          actual=tuple(x.shape), expected=f"H, W >= {min_hw}")
-
-
-def min_upsampling_size(factor: int, block_size: int = 3, noise_estimated: bool = True,
-                        noise_patch: int = WHITE_NOISE_PATCH) -> int:
-    """The smallest height and width of a depth map that restoration (``factor=1``) or guided upsampling by
-    ``factor`` accepts.
-
-    Two rules, found by running every size from 1×1 (x2 to x32, the default and the shipped models):
-
-    * the output, ``factor`` times the depth, holds one ``block_size × block_size`` block for block matching:
-      ``ceil(block_size / factor)``;
-    * upsampling (``factor > 1``) whose white-noise level is estimated from the low-resolution depth
-      (``noise_estimated``: no ``noise_sigma`` given, and the output band or the refiner needs it) takes
-      ``noise_patch × noise_patch`` patches of it (:func:`~torch_depth_sr.noise.white_noise_sigma`): ``noise_patch``.
-
-    The filters of upsampling itself (joint bilateral, guided, domain transform) pad and take any size >= 1.
-
-    Examples:
-        >>> [min_upsampling_size(f) for f in (1, 2, 4, 16)]
-        [3, 5, 5, 5]
-        >>> [min_upsampling_size(f, noise_estimated=False) for f in (1, 2, 4, 16)]
-        [3, 2, 1, 1]
-        >>> min_upsampling_size(2, block_size=21)
-        11
-    """
-    least = -(-int(block_size) // int(factor))
-    if factor > 1 and noise_estimated:
-        least = max(least, int(noise_patch))
-    return least
-
-
-def check_upsampling_size(h: int, w: int, factor: int, *, block_size: int = 3, noise_estimated: bool = True,
-                          noise_patch: int = WHITE_NOISE_PATCH, shape: Optional[tuple] = None) -> None:
-    """Raise ShapeError unless an ``h × w`` depth can be restored (``factor=1``) or upsampled by ``factor``.
-
-    The bound is :func:`min_upsampling_size`; ``shape`` (the depth's full shape) is what the error reports as
-    ``actual`` (default ``(h, w)``).
-
-    Raises:
-        ShapeError: naming the depth's size, the smallest size this ``factor`` allows and why.
-
-    Examples:
-        >>> check_upsampling_size(5, 5, 16)
-        >>> check_upsampling_size(3, 4, 16)  # doctest: +ELLIPSIS
-        Traceback (most recent call last):
-        ...
-        torch_depth_sr.errors.ShapeError: depth is 3x4 (output 48x64); ... at least 5x5: its noise level is estimated ...
-    """
-    least = min_upsampling_size(factor, block_size, noise_estimated, noise_patch)
-    if min(h, w) >= least:
-        return
-    actual = tuple(shape) if shape is not None else (int(h), int(w))
-    if factor == 1:
-        raise ShapeError(f"depth is {h}x{w}; it must be at least {least}x{least}, the block size used by block "
-                         "matching.", actual=actual, expected=f"depth H, W >= {least}")
-    reasons = []
-    if min(h, w) * factor < block_size:
-        reasons.append(f"the output must hold one {block_size}x{block_size} block, the block size used by block "
-                       "matching")
-    if noise_estimated and min(h, w) < noise_patch:
-        reasons.append(f"its noise level is estimated on {noise_patch}x{noise_patch} patches of it. Pass noise_sigma "
-                       "(the noise std in depth units) to upsample a smaller depth, or upsample a larger crop")
-    raise ShapeError(f"depth is {h}x{w} (output {h * factor}x{w * factor}); guided upsampling by x{factor} needs a "
-                     f"depth of at least {least}x{least}: {'; '.join(reasons)}.",
-                     actual=actual, expected=f"depth H, W >= {least} at x{factor}")
 
 
 _SIGMA_ALLOWED = "None (estimate it), or a finite number > 0 in depth units, or one such number per sample"

@@ -99,6 +99,8 @@ def white_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, patch: int = 
         True
     """
     sd = estimate_noise_sigma(depth, observed)
+    if min(depth.shape[-2:]) < patch:  # no complete patch at all
+        return sd
     d = depth.detach().double()
     m = (observed > 0).to(d.dtype)
     dh = torch.zeros_like(d)

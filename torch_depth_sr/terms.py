@@ -16,18 +16,18 @@ The order of the list is the order of the sums (floating point: the order is par
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from functools import partial
+from typing import Any, Callable, Optional
 
 import torch
 from torch import nn
 
 from .block_matching import BlockMatches
-from .config import CleanSamples, GuidedPrior, ValuePrior
+from .config import CleanSamples, GuidedPrior, SingularConfig, ValuePrior
 from .nonlocal_prior import nonlocal_terms
 from .observation import Observation
 from .operators import grad_adjoint
 from .shrinkage import group_soft_threshold, soft_threshold
-from .config import SingularConfig
 from .stages import SingularDetector
 from .state import RestorationState, stage
 
@@ -255,28 +255,31 @@ def _old_alpha(alpha: Optional[torch.Tensor], step: LayerStep) -> torch.Tensor:
     return step.state.alpha
 
 
-def _range_sigma(r: Optional[float], r_clean: Optional[float]):
+def _range_sigma(r: Optional[float], r_clean: Optional[float]) -> Callable:
     """The value prior's range σ as a function of the gate's verdict: ``r``, per sample ``r_clean`` where the last
     gated test found no outliers; None = no range kernel."""
-    def fixed(clean: Optional[torch.Tensor]) -> Optional[float]:
-        return r
-
-    def per_sample(clean: Optional[torch.Tensor]) -> Optional[float | torch.Tensor]:
-        return r if clean is None else torch.where(clean, float(r_clean), float(r))
-
-    return fixed if r is None or r_clean is None else per_sample
+    return partial(_fixed_range, r) if r is None or r_clean is None else partial(_range_per_sample, r, r_clean)
 
 
-def _weight_on_clean_samples(weight: float, weight_clean: Optional[float], value: bool):
+def _fixed_range(r: Optional[float], clean: Optional[torch.Tensor]) -> Optional[float]:
+    return r
+
+
+def _range_per_sample(r: float, r_clean: float, clean: Optional[torch.Tensor]) -> float | torch.Tensor:
+    return r if clean is None else torch.where(clean, float(r_clean), float(r))
+
+
+def _weight_on_clean_samples(weight: float, weight_clean: Optional[float], value: bool) -> Callable:
     """The value prior's weights W as a function of the gate's verdict: η₃ = ``weight_clean`` instead of ``weight``
     on the samples the last gated test found clean."""
-    def same(diag: Optional[torch.Tensor], clean: Optional[torch.Tensor]) -> Optional[torch.Tensor]:
-        return diag
+    if value and weight_clean is not None and weight_clean != weight:
+        return partial(_weight_per_sample, weight_clean / weight)
+    return _same_weight
 
-    def per_sample(diag: torch.Tensor, clean: Optional[torch.Tensor]) -> torch.Tensor:
-        if clean is None:
-            return diag
-        return diag * torch.where(clean, weight_clean / weight, 1.0).to(diag.dtype)
 
-    return per_sample if value and weight_clean is not None and weight_clean != weight else same
+def _same_weight(diag: Optional[torch.Tensor], clean: Optional[torch.Tensor]) -> Optional[torch.Tensor]:
+    return diag
 
+
+def _weight_per_sample(ratio: float, diag: torch.Tensor, clean: Optional[torch.Tensor]) -> torch.Tensor:
+    return diag if clean is None else diag * torch.where(clean, ratio, 1.0).to(diag.dtype)

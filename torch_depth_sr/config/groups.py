@@ -54,7 +54,7 @@ class Group:
         """A copy with ``changes``; a nested group may be given as a dict of changes."""
         for k, v in list(changes.items()):
             if k in self._NESTED and isinstance(v, dict):
-                changes[k] = dataclasses.replace(getattr(self, k), **v)
+                changes[k] = getattr(self, k).replace(**v)
         known = [f.name for f in dataclasses.fields(self)]
         if set(changes) - set(known):
             raise ParameterError(self._NAME, changes, f"changes of some of {known}")

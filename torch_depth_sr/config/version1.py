@@ -5,9 +5,12 @@ default below (not a later default), and a sentinel that switched a step off (``
 ``nl_value_weight=0``, ``fidelity_band=0``, ...) becomes that group's ``None``."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any, Optional
 
 from ..errors import ParameterError
+
+if TYPE_CHECKING:
+    from .restorer import RestorerConfig
 
 __all__ = ["FLAT_FIELDS", "VERSION1_DEFAULTS", "flat_changes", "from_version1", "to_version1"]
 
@@ -43,7 +46,7 @@ _UNIT_MULTIPLIERS = dict(lam=1.0, eta=1.0, gamma=1.0, mu1=1.0, mu2=1.0)
 _SIDED = dict(gap=4.0, min_share=0.75, passes=8, choice_sigma_space=1.5, ambiguous="mix")
 
 
-def from_version1(values: dict):
+def from_version1(values: dict) -> "RestorerConfig":
     """The version-2 :class:`~torch_depth_sr.config.RestorerConfig` of a version-1 flat dict (some or all of
     :data:`FLAT_FIELDS`; the rest take :data:`VERSION1_DEFAULTS`)."""
     from .restorer import RestorerConfig
@@ -133,7 +136,7 @@ def _dict_field(v: Any, name: str) -> dict:
     return v
 
 
-def to_version1(config) -> dict:
+def to_version1(config: "RestorerConfig") -> dict:
     """The version-1 flat view of a :class:`~torch_depth_sr.config.RestorerConfig`: every field of
     :data:`FLAT_FIELDS`, a group that is off written as its version-1 sentinel (``snap_rounds=0``, ...) and the
     other fields of such a group at their version-1 defaults. :func:`from_version1` of it gives ``config`` back
@@ -241,7 +244,7 @@ _SETS: dict = {
     "extra": ("sided_fill",),
 }
 
-def flat_changes(values: dict, base=None) -> dict:
+def flat_changes(values: dict, base: Optional["RestorerConfig"] = None) -> dict:
     """The version-2 changes (:meth:`RestorerConfig.replace <torch_depth_sr.config.RestorerConfig.replace>`
     arguments) that a partial version-1 flat dict makes to ``base`` (default: the defaults).
 

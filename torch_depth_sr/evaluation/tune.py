@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
-from typing import Callable, Iterable, Optional, Sequence
+from typing import Any, Callable, Iterable, Optional, Sequence
 
 import torch
 
@@ -29,7 +29,7 @@ SEARCH = ("singular.sigma_floor", "guided_prior.weight", "weights.lam", "weights
           "weights.gamma", "block_matching.color_weight", "block_matching.temperature")
 
 
-def get_value(config: RestorerConfig, name: str):
+def get_value(config: RestorerConfig, name: str) -> Any:
     """The setting ``name`` of ``config``: a dotted version-2 path (``"weights.lam"``; None where a group on the
     path is off) or a version-1 flat name (``"lam"``)."""
     if name in FLAT_FIELDS:  # guided_prior: the version-1 weight β (0 = off)
