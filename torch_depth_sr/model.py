@@ -30,7 +30,7 @@ from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import RestorerConfig, load_config_file, preset_config
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .guidance import GuidanceNet, NoGuidance
-from .initial import InitialEstimate, initial_stages
+from .initial import initial_stages
 from .layers import UnrolledLayer
 from .observation import Observation, observe
 from .operators import degradation_operator
