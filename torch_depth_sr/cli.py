@@ -1,4 +1,4 @@
-"""Command line: ``torch-depth-sr {demo,restore,bench,train,train-refiner}``."""
+"""Command line: ``torch-depth-sr {demo,restore,bench,train,train-refiner,warmup}``."""
 from __future__ import annotations
 
 import argparse
@@ -85,6 +85,29 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from .evaluation.bench import run_bench
 
     return run_bench(args)
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    """Compile the numba CPU kernels into numba's on-disk cache before the first forward (``make install`` runs it)."""
+    from . import native
+    from .errors import DepthSRError
+
+    if native.numba_disabled():
+        print("torch-depth-sr warmup: TORCH_DEPTH_SR_NO_NUMBA is set: the numba kernels are off, nothing to compile")
+        return 0
+    names = list(dict.fromkeys(args.dtype))
+    try:
+        native.cpu_kernel("singular_kernel", "singular_rounds_cpu", required=True)
+    except DepthSRError:  # numba missing or broken: one line, exit status 1 (make install stops there)
+        raise DepthSRError(f"{native._FAILED}: there are no kernels to compile (the forward would run the slower "
+                           "torch path)") from None
+    print(f"torch-depth-sr warmup: compiling the numba CPU kernels for {', '.join(names)} into numba's cache "
+          f"{native.kernel_cache_dir()} (about {native.COMPILE_SECONDS * len(names)} s when it is empty; later runs "
+          "only load them)", flush=True)
+    report = native.warmup([getattr(torch, n) for n in names], log=lambda line: print(f"  {line}", flush=True))
+    print(f"torch-depth-sr warmup: done in {report['seconds']:.1f} s: {report['compiled']} kernel signature(s) "
+          f"compiled, {report['loaded']} loaded from the cache")
+    return 0
 
 
 class _Parser(argparse.ArgumentParser):
@@ -179,6 +202,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "this saved model folder (e.g. runs/x/best) instead of the shipped parameters")
     b.set_defaults(func=cmd_bench)
 
+    wu = sub.add_parser("warmup", help="compile the numba CPU kernels now (once per install; make install runs it)",
+                        description="Compile every numba CPU kernel the forward can call (block matching, re-matching, "
+                                    "nonlocal terms, singular test) into numba's on-disk cache, so that the first "
+                                    "forward does not wait for it. A second run only loads them.")
+    wu.add_argument("--dtype", nargs="+", choices=["float32", "float64"], default=["float32", "float64"],
+                    help="the input dtypes to compile for (default: both)")
+    wu.set_defaults(func=cmd_warmup)
+
     from .training.cli import add_train_parser, add_train_refiner_parser
 
     add_train_parser(sub)
@@ -219,7 +250,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
 from .errors import describe_error, single_line as _single_line  # noqa: E402  (one home: errors.py)
 
-__all__ = ["cmd_demo", "RESTORE_HELP", "cmd_restore", "cmd_bench", "build_parser", "main"]
+__all__ = ["cmd_demo", "RESTORE_HELP", "cmd_restore", "cmd_bench", "cmd_warmup", "build_parser", "main"]
 
 
 def _check_device(name) -> None:
