@@ -76,6 +76,12 @@ Exit status: 0 done, 1 a file could not be restored or written, 2 a usage mistak
 
 
 def cmd_restore(args: argparse.Namespace) -> int:
+    # ---- issue 28: whole recordings (torch_depth_sr/recordings/cli.py) ----
+    if getattr(args, "recordings", None) is not None:
+        from .recordings.cli import restore_recordings
+
+        return restore_recordings(args)
+    # ---- end issue 28 ----
     from .restore_files import restore_paths
 
     return restore_paths(args)
@@ -174,6 +180,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--pretrained", default=None, help="name of shipped parameters (see DepthRestorer.from_pretrained)")
     r.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers for folders")
     r.set_defaults(func=cmd_restore)
+    # ---- issue 28: restore --recordings ROOT OUT (torch_depth_sr/recordings/cli.py) ----
+    from .recordings.cli import add_recordings_arguments
+
+    add_recordings_arguments(r)
+    # ---- end issue 28 ----
 
     b = sub.add_parser("bench", help="benchmarks on the shared Middlebury data (see README)")
     b.add_argument("--track", required=True,
