@@ -60,7 +60,7 @@ def test_warmup_leaves_nothing_for_the_forward_to_compile(scene):
         for dt in (torch.float32, torch.float64):
             y, rgb = scene["depth"].to(dt), scene["rgb"].to(dt)
             DepthRestorer()(y, rgb)
-            DepthRestorer.preset("fast")(y, rgb)
+            DepthRestorer.from_preset("fast")(y, rgb)
     assert c.names == []
 
 

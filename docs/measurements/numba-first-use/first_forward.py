@@ -56,7 +56,7 @@ event.register("numba:compile", _Compiles())
 dt = getattr(torch, args.dtype)
 y, rgb, gt = make_inputs(h, w, 1)
 y, rgb = y.to(dt), rgb.to(dt)
-make = (lambda: DepthRestorer.preset(args.preset)) if args.preset else DepthRestorer
+make = (lambda: DepthRestorer.from_preset(args.preset)) if args.preset else DepthRestorer
 t1, c1 = time.perf_counter(), time.process_time()
 make()(y, rgb)
 t2, c2 = time.perf_counter(), time.process_time()

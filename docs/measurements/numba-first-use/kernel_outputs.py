@@ -48,7 +48,7 @@ for threads in (1, 2):
         out[f"sg_{tag}_q"], out[f"sg_{tag}_p"] = q.numpy(), p.numpy()
         y, c, _ = make_inputs(48, 64, 1)
         out[f"fw_{tag}"] = DepthRestorer()(y.to(dt), c.to(dt)).numpy()
-        out[f"fwfast_{tag}"] = DepthRestorer.preset("fast")(y.to(dt), c.to(dt)).numpy()
+        out[f"fwfast_{tag}"] = DepthRestorer.from_preset("fast")(y.to(dt), c.to(dt)).numpy()
 mode, path = sys.argv[1], sys.argv[2]
 if mode == "save":
     np.savez(path, **out)
