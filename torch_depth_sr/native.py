@@ -219,9 +219,9 @@ def kernel_cache_dir() -> str:
 
     if numba.config.CACHE_DIR:
         return str(numba.config.CACHE_DIR)
-    from . import singular_kernel
+    from .singular_kernel import _pixels
 
-    path = getattr(getattr(singular_kernel._pixels, "_cache", None), "_cache_path", None)
+    path = getattr(getattr(_pixels, "_cache", None), "_cache_path", None)
     return str(path) if path else "numba's cache"
 
 
