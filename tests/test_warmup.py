@@ -16,6 +16,7 @@ import torch
 pytest.importorskip("numba")
 
 from torch_depth_sr import native  # noqa: E402
+from torch_depth_sr.warmup import warmup  # noqa: E402
 from torch_depth_sr.cli import main  # noqa: E402
 
 pytestmark = pytest.mark.skipif(native.numba_disabled(), reason="TORCH_DEPTH_SR_NO_NUMBA is set")
@@ -48,13 +49,13 @@ class _Compiles:
 def test_warmup_leaves_nothing_for_the_forward_to_compile(scene):
     from torch_depth_sr import DepthRestorer
 
-    native.warmup()  # compiles, or loads what an earlier process compiled
+    warmup()  # compiles, or loads what an earlier process compiled
     sigs = native.compiled_signatures()
     for kernel in ("block_matching.cpu_exact._band", "block_matching.cpu_exact._finalize",
                    "block_matching.refine_cpu._refine", "nonlocal_kernel._pixels", "singular_kernel._pixels"):
         held = " ".join(sigs.get(kernel, []))
         assert "float32" in held and "float64" in held, (kernel, sigs.get(kernel))
-    again = native.warmup()
+    again = warmup()
     assert again["compiled"] == 0 and again["loaded"] == 0  # idempotent: all in memory already
     with _Compiles() as c:
         for dt in (torch.float32, torch.float64):

@@ -95,7 +95,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_warmup(args: argparse.Namespace) -> int:
     """Compile the numba CPU kernels into numba's on-disk cache before the first forward (``make install`` runs it)."""
-    from . import native
+    from . import native, warmup
     from .errors import DepthSRError
 
     if native.numba_disabled():
@@ -110,7 +110,7 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     print(f"torch-depth-sr warmup: compiling the numba CPU kernels for {', '.join(names)} into numba's cache "
           f"{native.kernel_cache_dir()} (about {native.COMPILE_SECONDS * len(names)} s when it is empty; later runs "
           "only load them)", flush=True)
-    report = native.warmup([getattr(torch, n) for n in names], log=lambda line: print(f"  {line}", flush=True))
+    report = warmup.warmup([getattr(torch, n) for n in names], log=lambda line: print(f"  {line}", flush=True))
     print(f"torch-depth-sr warmup: done in {report['seconds']:.1f} s: {report['compiled']} kernel signature(s) "
           f"compiled, {report['loaded']} loaded from the cache")
     return 0
