@@ -121,6 +121,14 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
         >>> snap_to_sides(x, rgb, rounds=1, radius=2)[0, 0, 1].tolist()
         [0.0, 0.0, 10.0, 10.0, 10.0]
     """
+    if _no_sample_active(active, x):  # nothing may move: the result is x (no window of any sample is sorted)
+        return x
+    some = _some_samples_active(active, x)
+    if some is not None:  # only the active samples' windows (each sample's result depends on its own only)
+        g = guide if guide.shape[0] == 1 else guide[some]
+        out = x.clone()
+        out[some] = snap_to_sides(x[some], g, rounds, radius, share, sigma_color, sigma_space)
+        return out
     for _ in range(int(rounds)):
         median, side_share = sided_median(x, guide, radius, sigma_color, sigma_space)
         move = side_share > share
@@ -128,6 +136,24 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
             move = move & active
         x = torch.where(move, median, x)
     return x
+
+
+def _no_sample_active(active: Optional[torch.Tensor], x: torch.Tensor) -> bool:
+    """Whether a per-sample ``active`` (B,1,1,1) says that no sample may change, checked on the CPU only: there
+    reading it costs nothing, while on a GPU it would make the host wait for the device (the step then runs and
+    changes nothing)."""
+    if active is None or x.device.type != "cpu" or active.shape[-2:] != (1, 1):
+        return False
+    return not bool(active.any())
+
+
+def _some_samples_active(active: Optional[torch.Tensor], x: torch.Tensor) -> Optional[torch.Tensor]:
+    """The indices of the active samples when a per-sample ``active`` leaves some out (CPU only, as above), else
+    None."""
+    if active is None or x.device.type != "cpu" or active.shape[-2:] != (1, 1) or active.shape[0] != x.shape[0]:
+        return None
+    a = active.reshape(-1)
+    return None if bool(a.all()) else a.nonzero()[:, 0]
 
 
 def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor,
@@ -152,6 +178,8 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     check_4d(x, "x", channels=1)
     check_same_hw(x, y, "x", "y")
     check_same_hw(x, guide, "x", "guide")
+    if _no_sample_active(active, x):  # nothing may change: the result is x
+        return x
     b, _, h, w = x.shape
     r = int(radius)
     near_edge = (F.max_pool2d(x, 5, 1, 2) + F.max_pool2d(-x, 5, 1, 2)) > edge
