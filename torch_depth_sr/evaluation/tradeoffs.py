@@ -26,7 +26,8 @@ import argparse
 import json
 import statistics
 import time
-from typing import Optional, Sequence
+from pathlib import Path
+from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
 import torch
@@ -199,10 +200,9 @@ def _plot(rows: list[dict], path) -> None:
     write_png(path, img)
 
 
-def front(out, bench_json: Sequence[str] = (), methods: Sequence[str] = FRONT_METHODS, repeats: int = 3,
-          threads: Optional[int] = 2, log=print) -> list[dict]:
+def front(out: Union[str, Path], bench_json: Sequence[str] = (), methods: Sequence[str] = FRONT_METHODS,
+          repeats: int = 3, threads: Optional[int] = 2, log: Callable[[str], None] = print) -> list[dict]:
     """The speed-accuracy picture (module docstring): ``out/front.png``, ``front.md``, ``front.json``."""
-    from pathlib import Path
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
