@@ -14,6 +14,7 @@ from .nonlocal_prior import nonlocal_gradient, nonlocal_value_prior
 from .shrinkage import group_soft_threshold, soft_threshold
 from .singular import detect_singular
 from .solvers.cg import conjugate_gradient
+from .stream import StreamRestorer
 from .transforms import RestoreDepth
 
 __version__ = "0.1.0"
@@ -31,6 +32,7 @@ __all__ = [
     "RestoreDepth",
     "RestorerConfig",
     "ShapeError",
+    "StreamRestorer",
     "__version__",
     "bad_pixel_rate",
     "block_match",
