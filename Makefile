@@ -10,8 +10,11 @@ $(BIN)/python:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 
+# warmup compiles the numba CPU kernels into numba's cache (once per install, 20-25 s of CPU; a second run only
+# loads them), so that the first forward of `make demo`, `make test` or a user's script does not wait for it
 install: $(BIN)/python
 	$(BIN)/pip install -q -c constraints.txt -e ".[test]"
+	$(BIN)/torch-depth-sr warmup
 
 demo: install
 	$(BIN)/torch-depth-sr demo --out out/demo --json out/demo/demo.json

@@ -2,9 +2,9 @@
 version-1 flat names converted the way a version-1 file of those settings converts."""
 import pytest
 
-from torch_depth_sr.config import RestorerConfig, apply_overrides, preset_config
-from torch_depth_sr.config.version1 import (FLAT_FIELDS, VERSION1_DEFAULTS, _SETS, flat_changes, from_version1,
-                                             to_version1)
+from torch_depth_sr.config import RestorerConfig, apply_overrides, from_version1, preset_config
+from torch_depth_sr.config.overrides import flat_changes
+from torch_depth_sr.config.version1 import _SETS, FLAT_FIELDS, VERSION1_DEFAULTS, to_version1
 from torch_depth_sr.errors import ParameterError
 
 # one value other than the version-1 default for every version-1 field; sentinels (0 = off) where a field had one

@@ -479,15 +479,25 @@ def _torchrun(script: Path, env: dict, timeout: int = 300) -> subprocess.Complet
 
 
 def _torchrun_script(tmp_path: Path, root: Path, out: Path) -> Path:
+    """Each rank writes its summary to ``<tmp_path>/summaries/rank<R>.json`` (not stdout: two processes sharing
+    torchrun's pipe can lose a buffered line on a loaded machine)."""
     script = tmp_path / f"run_{out.name}.py"
+    summaries = tmp_path / "summaries"
+    summaries.mkdir(exist_ok=True)
     script.write_text(
-        f"import json, sys\nsys.path.insert(0, {str(TESTS)!r})\nfrom test_recordings import RunningMean\n"
+        f"import json, os, sys\nsys.path.insert(0, {str(TESTS)!r})\nfrom test_recordings import RunningMean\n"
         "from torch_depth_sr.recordings import restore_dataset\n"
         f"s = restore_dataset({str(root)!r}, {str(out)!r}, restorer=RunningMean, resume=True, threads=1, "
         "progress=False)\n"
-        "print('SUMMARY', json.dumps({'written': s.written, 'skipped': s.skipped, 'frames': s.frames, "
-        "'processes': s.processes, 'seconds': s.seconds}))\n")
+        "summary = json.dumps({'written': s.written, 'skipped': s.skipped, 'frames': s.frames, "
+        "'processes': s.processes})\n"
+        f"path = os.path.join({str(summaries)!r}, 'rank' + os.environ.get('RANK', '0') + '.json')\n"
+        "with open(path, 'w') as f:\n    f.write(summary)\n    f.flush()\n    os.fsync(f.fileno())\n")
     return script
+
+
+def _summaries(tmp_path: Path) -> list:
+    return [json.loads(p.read_text()) for p in sorted((tmp_path / "summaries").glob("rank*.json"))]
 
 
 def test_torchrun_two_processes_write_every_frame_once_bit_identical(root, reference, tmp_path):
@@ -499,7 +509,7 @@ def test_torchrun_two_processes_write_every_frame_once_bit_identical(root, refer
     p = _torchrun(_torchrun_script(tmp_path, root, out), {"RECORDINGS_TEST_LOG": str(log)})
     seconds = time.perf_counter() - t0
     assert p.returncode == 0, p.stderr[-3000:]
-    summaries = [json.loads(line.split("SUMMARY ", 1)[1]) for line in p.stdout.splitlines() if "SUMMARY" in line]
+    summaries = _summaries(tmp_path)
     assert len(summaries) == 2 and all(s == summaries[0] for s in summaries)
     assert summaries[0]["processes"] == 2 and summaries[0]["written"] == sum(COUNTS)
     # every frame stepped exactly once, by two different processes (rank 0: 5 frames, rank 1: 4 + 3)
@@ -520,8 +530,10 @@ def test_torchrun_killed_rank_resumes_to_the_same_manifest(root, reference, tmp_
     p = _torchrun(script, {"RECORDINGS_TEST_KILL_AFTER": "2", "RECORDINGS_TEST_KILL_RANK": "1"})
     assert p.returncode != 0
     assert not (out / "manifest.jsonl").exists() and len(read_manifest(shard_path(out, 1))) == 2
+    for old in (tmp_path / "summaries").glob("rank*.json"):
+        old.unlink()
     p = _torchrun(script, {})  # the same command again
     assert p.returncode == 0, p.stderr[-3000:]
-    summary = json.loads(p.stdout.split("SUMMARY ", 1)[1].splitlines()[0])
+    summary = _summaries(tmp_path)[0]
     assert summary["skipped"] >= 2 and summary["skipped"] + summary["written"] == sum(COUNTS)
     assert _records(out) == _records(reference) and _outputs(out) == _outputs(reference)

@@ -11,6 +11,7 @@ from .metrics import bad_pixel_rate, mae, rmse
 from .model import DepthRestorer, RestorationResult, restore_depth
 from .noise import estimate_noise_sigma
 from .nonlocal_prior import nonlocal_gradient, nonlocal_value_prior
+from .recordings import discover_recordings, restore_dataset
 from .shrinkage import group_soft_threshold, soft_threshold
 from .singular import detect_singular
 from .solvers.cg import conjugate_gradient
@@ -38,6 +39,7 @@ __all__ = [
     "block_match",
     "conjugate_gradient",
     "detect_singular",
+    "discover_recordings",
     "estimate_noise_sigma",
     "fill_holes",
     "gather_neighbors",
@@ -46,6 +48,7 @@ __all__ = [
     "nonlocal_gradient",
     "nonlocal_value_prior",
     "refine_matches",
+    "restore_dataset",
     "restore_depth",
     "rmse",
     "soft_threshold",

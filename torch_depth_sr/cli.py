@@ -1,4 +1,4 @@
-"""Command line: ``torch-depth-sr {demo,restore,bench,train,train-refiner}``."""
+"""Command line: ``torch-depth-sr {demo,restore,bench,train,train-refiner,warmup}``."""
 from __future__ import annotations
 
 import argparse
@@ -76,6 +76,12 @@ Exit status: 0 done, 1 a file could not be restored or written, 2 a usage mistak
 
 
 def cmd_restore(args: argparse.Namespace) -> int:
+    # ---- issue 28: whole recordings (torch_depth_sr/recordings/cli.py) ----
+    if getattr(args, "recordings", None) is not None:
+        from .recordings.cli import restore_recordings
+
+        return restore_recordings(args)
+    # ---- end issue 28 ----
     from .restore_files import restore_paths
 
     return restore_paths(args)
@@ -85,6 +91,29 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from .evaluation.bench import run_bench
 
     return run_bench(args)
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    """Compile the numba CPU kernels into numba's on-disk cache before the first forward (``make install`` runs it)."""
+    from . import native, warmup
+    from .errors import DepthSRError
+
+    if native.numba_disabled():
+        print("torch-depth-sr warmup: TORCH_DEPTH_SR_NO_NUMBA is set: the numba kernels are off, nothing to compile")
+        return 0
+    names = list(dict.fromkeys(args.dtype))
+    try:
+        native.cpu_kernel("singular_kernel", "singular_rounds_cpu", required=True)
+    except DepthSRError:  # numba missing or broken: one line, exit status 1 (make install stops there)
+        raise DepthSRError(f"{native._FAILED}: there are no kernels to compile (the forward would run the slower "
+                           "torch path)") from None
+    print(f"torch-depth-sr warmup: compiling the numba CPU kernels for {', '.join(names)} into numba's cache "
+          f"{native.kernel_cache_dir()} (about {native.COMPILE_SECONDS * len(names)} s when it is empty; later runs "
+          "only load them)", flush=True)
+    report = warmup.warmup([getattr(torch, n) for n in names], log=lambda line: print(f"  {line}", flush=True))
+    print(f"torch-depth-sr warmup: done in {report['seconds']:.1f} s: {report['compiled']} kernel signature(s) "
+          f"compiled, {report['loaded']} loaded from the cache")
+    return 0
 
 
 class _Parser(argparse.ArgumentParser):
@@ -151,6 +180,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--pretrained", default=None, help="name of shipped parameters (see DepthRestorer.from_pretrained)")
     r.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers for folders")
     r.set_defaults(func=cmd_restore)
+    # ---- issue 28: restore --recordings ROOT OUT (torch_depth_sr/recordings/cli.py) ----
+    from .recordings.cli import add_recordings_arguments
+
+    add_recordings_arguments(r)
+    # ---- end issue 28 ----
 
     b = sub.add_parser("bench", help="benchmarks on the shared Middlebury data (see README)")
     b.add_argument("--track", required=True,
@@ -192,6 +226,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "this saved model folder (e.g. runs/x/best) instead of the shipped parameters")
     b.set_defaults(func=cmd_bench)
 
+    wu = sub.add_parser("warmup", help="compile the numba CPU kernels now (once per install; make install runs it)",
+                        description="Compile every numba CPU kernel the forward can call (block matching, re-matching, "
+                                    "nonlocal terms, singular test) into numba's on-disk cache, so that the first "
+                                    "forward does not wait for it. A second run only loads them.")
+    wu.add_argument("--dtype", nargs="+", choices=["float32", "float64"], default=["float32", "float64"],
+                    help="the input dtypes to compile for (default: both)")
+    wu.set_defaults(func=cmd_warmup)
+
     from .training.cli import add_train_parser, add_train_refiner_parser
 
     add_train_parser(sub)
@@ -232,7 +274,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
 from .errors import describe_error, single_line as _single_line  # noqa: E402  (one home: errors.py)
 
-__all__ = ["cmd_demo", "RESTORE_HELP", "cmd_restore", "cmd_bench", "build_parser", "main"]
+__all__ = ["cmd_demo", "RESTORE_HELP", "cmd_restore", "cmd_bench", "cmd_warmup", "build_parser", "main"]
 
 
 def _check_device(name) -> None:

@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["estimate_noise_sigma", "white_noise_sigma", "quantisation_step", "implausible", "depth_scale"]
+__all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "quantisation_step", "sample_percentiles",
+           "white_noise_sigma"]
 
 _MAD_TO_STD = 1.4826
 # Patch PCA over second differences on clean maps resampled from integer depth (the eleven Middlebury 2006 images of
@@ -169,14 +170,32 @@ def _percentiles(vals: torch.Tensor) -> torch.Tensor:
     return torch.quantile(sub.to(dt), torch.tensor([0.01, 0.99], dtype=dt, device=vals.device)).to(vals.dtype)
 
 
-def implausible(depth: torch.Tensor, observed: torch.Tensor, scale: torch.Tensor, margin: float = 100.0
-                ) -> torch.Tensor:
+def sample_percentiles(depth: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
+    """p1 and p99 ``(B, 2)`` of each sample's measured values, in ``depth``'s dtype (0 with fewer than two): what
+    :func:`depth_scale` and :func:`implausible` both read, computed once by the scale policy.
+
+    Examples:
+        >>> y = torch.arange(100.0).view(1, 1, 10, 10)
+        >>> sample_percentiles(y, torch.ones_like(y))
+        tensor([[ 0.9900, 98.0100]])
+    """
+    out = depth.new_zeros(depth.shape[0], 2)
+    for i in range(depth.shape[0]):
+        vals = depth[i][observed[i] > 0].detach()
+        if vals.numel() > 1:
+            out[i] = _percentiles(vals)
+    return out
+
+
+def implausible(depth: torch.Tensor, observed: torch.Tensor, scale: torch.Tensor, margin: float = 100.0,
+                percentiles: torch.Tensor | None = None) -> torch.Tensor:
     """Measured pixels ``(B,1,H,W)`` bool that lie far outside every surface of their sample.
 
     A value beyond ``[p1 − r − margin·scale, p99 + r + margin·scale]`` (``r = p99 − p1`` of the measured
     depth, ``scale`` the noise level of the scale policy) is no surface but a glitch of the sensor or the
     file (one pixel of 1e10 among disparities). Such a pixel is treated as not measured: the restorer
     fills it like a hole and its confidence is 0, and one pixel can no longer overflow the arithmetic.
+    ``percentiles``: :func:`sample_percentiles` of the same input, when the caller has them.
 
     Examples:
         >>> y = torch.full((1, 1, 8, 8), 100.0); y[0, 0, 3, 3] = 1e10
@@ -186,10 +205,9 @@ def implausible(depth: torch.Tensor, observed: torch.Tensor, scale: torch.Tensor
     out = torch.zeros_like(observed, dtype=torch.bool)
     for i in range(depth.shape[0]):
         m = observed[i] > 0
-        vals = depth[i][m].detach()
-        if vals.numel() < 2:
+        if int(m.sum()) < 2:
             continue
-        p1, p99 = _percentiles(vals)
+        p1, p99 = (percentiles[i] if percentiles is not None else _percentiles(depth[i][m].detach()))
         r = p99 - p1
         lo, hi = p1 - r - margin * scale[i], p99 + r + margin * scale[i]
         out[i] = m & ((depth[i] < lo) | (depth[i] > hi))
@@ -208,8 +226,8 @@ def _grid_step(vals: torch.Tensor, default: float) -> float:
 
 
 def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma: float | torch.Tensor | None = None,
-                relative_floor: float = 1e-3, step: torch.Tensor | None = None
-                ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+                relative_floor: float = 1e-3, step: torch.Tensor | None = None,
+                percentiles: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Return ``(offset (B,), scale (B,), sigma (B,))`` of the scale policy.
 
     ``scale = max(sigma, relative_floor · (p99 − p1 of measured depth), 1e-6 · |offset|)``:
@@ -217,16 +235,14 @@ def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma: float 
     proportional to the depth unit, so the policy stays scale-equivariant.
     ``noise_sigma`` (float or ``(B,)``, in depth units) overrides the estimate; otherwise the estimate
     is floored at ``step/√12``, the rounding noise of a quantised grid (``step (B,)``, 0 = none).
+    ``percentiles``: :func:`sample_percentiles` of the same input, when the caller has them.
     """
     b = depth.shape[0]
     offset = depth.new_zeros(b)
-    spread = depth.new_zeros(b)
     for i in range(b):
-        vals = depth[i][observed[i] > 0].detach()
-        offset[i] = vals.median()
-        if vals.numel() > 1:
-            q = _percentiles(vals)
-            spread[i] = q[1] - q[0]
+        offset[i] = depth[i][observed[i] > 0].detach().median()
+    q = sample_percentiles(depth, observed) if percentiles is None else percentiles
+    spread = q[:, 1] - q[:, 0]
     if noise_sigma is None:
         sigma = estimate_noise_sigma(depth, observed)
         if step is not None:

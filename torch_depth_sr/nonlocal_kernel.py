@@ -6,8 +6,9 @@ and the squared length of the weighted centroid offset. The torch path needs a `
 gather and ~15 passes over it. No gradient: the torch path serves whenever autograd needs one.
 
 Sums are in float64 (the torch path sums in the input dtype); the outputs agree with the torch path to
-the input dtype's round-off. With ``torch.get_num_threads() > 1`` pixels run in parallel (``numba.prange``),
-with one thread a serial copy of the loop runs on the calling thread.
+the input dtype's round-off. With ``torch.get_num_threads() > 1`` shares of the pixels run in parallel (the kernel
+releases the GIL; :func:`~torch_depth_sr.native.run_tasks`, not ``numba.prange``, which compiles several times
+longer), with one thread the loop runs on the calling thread.
 Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
@@ -16,14 +17,14 @@ from typing import Optional
 
 import numpy as np
 import torch
-from numba import njit, prange
+from numba import njit
 
-from .native import as_numpy, kernel_threads
+from .native import as_numpy, kernel_threads, run_tasks
 
 __all__ = ["nonlocal_terms_cpu"]
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=False, nogil=True)
 def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     """α and the statistics of pixels ``[t0, t1)`` of the flattened batch.
 
@@ -117,17 +118,6 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
             alpha[n, 1, i] = a1
 
 
-_CHUNK = 4096  # pixels per parallel task
-
-
-@njit(parallel=True, cache=True, fastmath=False)
-def _terms_parallel(x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
-    """:func:`_pixels` over every pixel of the batch, chunks of pixels in parallel."""
-    total = idx.shape[0] * idx.shape[2]
-    for c in prange((total + _CHUNK - 1) // _CHUNK):
-        _pixels(c * _CHUNK, min(total, (c + 1) * _CHUNK), x, g, idx, wt, width, ridge, range_sigma, alpha, stats)
-
-
 def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: torch.Tensor, weight: torch.Tensor,
                        ridge: float = 0.0, range_sigma: Optional[torch.Tensor] = None
                        ) -> tuple[Optional[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -155,10 +145,14 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: t
            else np.zeros((b, 0), np_dt))
     alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
     stats = np.empty((b, 3, h * w), dtype=np_dt)
-    if kernel_threads() > 1:
-        _terms_parallel(xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
-    else:  # on the calling thread: no hand-off to numba's thread pool
-        _pixels(0, b * h * w, xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
+    total = b * h * w
+    n = kernel_threads()
+    if n > 1:  # one equal share of the pixels per thread (_pixels releases the GIL; few hand-offs)
+        part = -(-total // n)
+        run_tasks(lambda c: _pixels(c * part, min(total, (c + 1) * part), xn, gn, idxn, wn, w, float(ridge), rsn,
+                                    alpha, stats), n)
+    else:  # on the calling thread: no hand-off to a thread pool
+        _pixels(0, total, xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
     st = torch.from_numpy(stats).view(b, 3, h, w)
     a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None
     return a, st[:, 0:1], st[:, 1:2], st[:, 2:3]

@@ -12,7 +12,7 @@ from typing import Any, Optional
 import torch
 
 from ._checks import check_noise_sigma
-from .noise import depth_scale, implausible, quantisation_step, white_noise_sigma
+from .noise import depth_scale, implausible, quantisation_step, sample_percentiles, white_noise_sigma
 from .operators import Degradation
 from .state import RunLog
 
@@ -76,8 +76,10 @@ def observe(y: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tenso
     (glitches) taken as missing and the scale estimated again without them; the task from ``K``."""
     b = y.shape[0]
     step = quantisation_step(y, observed, integer_input=integer_input)
-    offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
-    glitches = implausible(y, observed, scale)
+    percentiles = sample_percentiles(y, observed)
+    offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step,
+                                       percentiles=percentiles)
+    glitches = implausible(y, observed, scale, percentiles=percentiles)
     if bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
         observed = torch.where(glitches, torch.zeros_like(observed), observed)
         step = quantisation_step(y, observed, integer_input=integer_input)

@@ -19,7 +19,7 @@ from .initial import InitialEstimate
 from .observation import Observation
 from .refiner import EdgeRefiner
 from .state import RestorationState, stage
-from .upsampling import hold_to_initial
+from .upsampling import hold_to_initial, upsampling_reference
 
 __all__ = ["DenoiseRefineStep", "EdgeRefitStep", "EdgeSnapStep", "FidelityBandStep", "OutputHoldStep", "RefineStep",
            "UpsampleRefineStep", "post_steps"]
@@ -138,8 +138,14 @@ class OutputHoldStep(nn.Module):
 
     def forward(self, x: torch.Tensor, state: RestorationState, obs: Observation,
                 initial: InitialEstimate) -> torch.Tensor:
-        return hold_to_initial(x, initial.reference, obs.K, self.upsampling, self.settings, obs.noise,
-                               obs.white.to(obs.sigma) / obs.scale)
+        ref = initial.reference  # x⁰'s filters, computed once per forward
+        # when the input's gradient is wanted, the filters run again, each its own node, so that the backward
+        # through them runs as before (once per use; one summed backward moves the input's gradient by ~1e-7)
+        separate = ref.lowres.requires_grad
+        if separate:
+            ref = upsampling_reference(ref.lowres, obs.observed, obs.rgb, obs.K.scale, self.upsampling)
+        return hold_to_initial(x, ref, obs.K, self.upsampling, self.settings, obs.noise,
+                               obs.white.to(obs.sigma) / obs.scale, separate_evidence=separate)
 
     def extra_repr(self) -> str:
         return ", ".join(f"{k}={v:g}" for k, v in self.settings.to_dict().items())

@@ -20,14 +20,21 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from .datasets.io import DEPTH_SUFFIXES, depth_suffixes_for, read_depth_stored, read_rgb, write_depth, \
+from .datasets.io import depth_suffixes_for, read_depth_stored, read_rgb, write_depth, \
     write_png_depth
+from .datasets.files import DEPTH_EXTS, RGB_EXTS
+from .datasets.files import as_numpy as _as_numpy
+from .datasets.files import check_writable as _check_writable
+from .datasets.files import describe_files as _files
+from .datasets.files import file_identity as _identity
+from .datasets.files import pair_folders as _pair_folders
+from .datasets.files import stored_layout as _stored_layout
+from .datasets.files import to_model_input as _to_model_input
+from .datasets.files import with_path as _with_path
 from .errors import DepthSRError, ModelFileError, UsageError
 
 __all__ = ["DEPTH_EXTS", "RGB_EXTS", "FORMATS_HELP", "Job", "DepthFilePairs", "plan_restore", "restore_paths"]
 
-DEPTH_EXTS = DEPTH_SUFFIXES
-RGB_EXTS = (".png", ".jpg", ".jpeg", ".ppm", ".bmp", ".tif", ".tiff")
 FORMATS_HELP = (".png (uint8 or uint16), .pfm (float32), .npy (any dtype), .tif/.tiff (what OpenCV stores: "
                 "integers, float32, float64) or .pgm (uint16, little-endian)")
 
@@ -145,41 +152,6 @@ def _plan_folder(depth_dir: Path, rgb_dir: Optional[Path], args) -> list[Job]:
     return [Job(d, c, out / d.name, _confidence_path(args.confidence, d, folder=True)) for d, c in zip(depths, rgbs)]
 
 
-def _pair_folders(depth_dir: Path, rgb_dir: Path | None) -> tuple[list[Path], list[Path | None]]:
-    # names starting with "." are skipped: hidden files, and the temporary files of an interrupted run
-    depths = sorted(p for p in depth_dir.iterdir()
-                    if p.suffix.lower() in DEPTH_EXTS and p.is_file() and not p.name.startswith("."))
-    if not depths:
-        raise UsageError(f"no depth files ({', '.join(DEPTH_EXTS)}) in the folder '{depth_dir}'")
-    if rgb_dir is None:
-        return depths, [None] * len(depths)
-    rgbs = {p.stem: p for p in rgb_dir.iterdir()
-            if p.suffix.lower() in RGB_EXTS and p.is_file() and not p.name.startswith(".")}
-    missing = [p.name for p in depths if p.stem not in rgbs]
-    if not missing:
-        return depths, [rgbs[p.stem] for p in depths]
-    ordered = sorted(rgbs.values())
-    if len(ordered) != len(depths):
-        raise UsageError(f"colour folder '{rgb_dir}' has no file named like {', '.join(missing[:3])}"
-                         f"{', ...' if len(missing) > 3 else ''} and holds {len(ordered)} colour files for "
-                         f"{len(depths)} depth files; pair them by name (a.png with a.jpg) or by sorted order with "
-                         "equal counts")
-    return depths, ordered
-
-
-def _identity(p: Path):
-    """What makes two paths the same file (symlinks, hard links, ``a/../b``): its device and inode; None if absent."""
-    # abspath folds "new/../b" into "b": the kernel cannot resolve it while "new" is missing, but will once the
-    # output's folders are created
-    for q in (p, Path(os.path.abspath(p))):
-        try:
-            st = q.stat()
-        except OSError:
-            continue
-        return st.st_dev, st.st_ino
-    return None
-
-
 def _check_targets(jobs: list[Job], args) -> list[Job]:
     """Refuse outputs that would replace an input or an existing file; mark those that --skip-existing skips."""
     depth_ids = {_identity(j.depth): j.depth for j in jobs}
@@ -214,21 +186,6 @@ def _check_targets(jobs: list[Job], args) -> list[Job]:
         raise UsageError(f"{_files(refused)} already exist{'s' if len(refused) == 1 else ''}; add --overwrite to "
                          "replace, or --skip-existing to keep what exists and restore the rest (nothing was written)")
     return [Job(j.depth, j.rgb, j.target, j.confidence, skip=id(j) in skipped) for j in jobs]
-
-
-def _files(paths: list[Path]) -> str:
-    shown = ", ".join(f"'{p}'" for p in paths[:3])
-    return shown if len(paths) <= 3 else f"{len(paths)} outputs ({shown}, ...)"
-
-
-def _check_writable(out: Path) -> None:
-    folder = out.parent
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent  # the folder that the missing ones will be created in
-    if not folder.is_dir():
-        raise UsageError(f"cannot write '{out}': '{folder}' is a file, not a folder; choose another output")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise UsageError(f"cannot write '{out}': no permission to write in the folder '{folder}'")
 
 
 # ---- running -----------------------------------------------------------------------------------------------------
@@ -311,11 +268,6 @@ def _restore_folder(model, jobs: list[Job], args) -> int:
                        "- fix or remove those files and rerun with --skip-existing")
 
 
-def _with_path(e: BaseException, path: Path, text: Optional[str] = None) -> str:
-    text = str(e) if text is None else text
-    return text if str(path) in text else f"{path}: {text}"
-
-
 def _restore_one(model, job: Job, depth: np.ndarray, rgb: Optional[np.ndarray], args) -> list[Path]:
     """Restore one map and write it (confidence first, so an existing depth output means a finished file)."""
     suffix = job.target.suffix.lower()
@@ -344,27 +296,3 @@ def _restore_one(model, job: Job, depth: np.ndarray, rgb: Optional[np.ndarray], 
 def _formats_for(dtype) -> str:
     names = " or ".join(depth_suffixes_for(dtype))
     return names.replace(".tif or .tiff", ".tif/.tiff")
-
-
-def _as_numpy(x) -> np.ndarray:
-    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
-
-
-def _to_model_input(depth: np.ndarray) -> np.ndarray:
-    if not depth.dtype.isnative:  # torch reads native byte order only; the output gets the input's back
-        depth = depth.astype(depth.dtype.newbyteorder("="))
-    if depth.dtype.kind == "f":
-        return np.where(np.isfinite(depth), depth, np.nan)  # PFM marks unknown with inf
-    return depth
-
-
-def _stored_layout(out: np.ndarray, src: Path) -> np.ndarray:
-    """An NPY map goes back with the singleton axis it was stored with, ``(1, H, W)`` or ``(H, W, 1)``."""
-    if src.suffix.lower() != ".npy":
-        return out
-    shape = np.load(str(src), mmap_mode="r").shape
-    if len(shape) == 3 and shape[0] == 1:
-        return out[None]
-    if len(shape) == 3 and shape[-1] == 1:
-        return out[..., None]
-    return out

@@ -136,7 +136,8 @@ def _edge_evidence(ref: UpsamplingReference, K: Degradation, consistency: float,
 
 
 def hold_to_initial(x: torch.Tensor, ref: UpsamplingReference, K: Degradation, c: UpsamplingConfig,
-                    hold: OutputHold, noise: torch.Tensor, white: torch.Tensor) -> torch.Tensor:
+                    hold: OutputHold, noise: torch.Tensor, white: torch.Tensor,
+                    separate_evidence: bool = False) -> torch.Tensor:
     """Do no harm on upsampling: the restored ``x (B,1,H,W)`` held within ``hold.band · white + hold.edge ·
     max(E − hold.edge_threshold · noise, 0)`` of x⁰ rebuilt with the noise ``white`` (:func:`bounded_upsample`;
     ``E`` the depth-edge evidence on the fine grid).
@@ -146,9 +147,13 @@ def hold_to_initial(x: torch.Tensor, ref: UpsamplingReference, K: Degradation, c
     texture (Middlebury Cloth1's ripples) has second differences of the noise level, ``white`` is 0: away from
     depth edges the output is x⁰, which is bicubic interpolation there, instead of the regularised surface that took
     the texture for noise (issue 12). Under noise the band is 3σ wide and hardly binds.
+
+    ``separate_evidence``: compute the edge evidence again here instead of reading ``ref``'s (same values; see
+    :class:`~torch_depth_sr.post_steps.OutputHoldStep`).
     """
     rebuilt = bounded_upsample(ref, K, c, noise=white)
-    evidence = F.interpolate(ref.evidence, scale_factor=K.scale, mode="nearest")
+    own = F.max_pool2d(plane_residual(ref.lowres), 3, stride=1, padding=1) if separate_evidence else ref.evidence
+    evidence = F.interpolate(own, scale_factor=K.scale, mode="nearest")
     n4, w4 = noise.to(x).view(-1, 1, 1, 1), white.to(x).view(-1, 1, 1, 1)
     band = hold.band * w4 + hold.edge * (evidence - hold.edge_threshold * n4).clamp_min(0)
     return clamp_between(x, rebuilt - band, rebuilt + band)

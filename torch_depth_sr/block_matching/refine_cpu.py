@@ -53,6 +53,10 @@ def _block_distance(xp, tp, cp, use_t, ya, xa, yb, xb, bs, crho, inb):
     return d if d > zero else zero
 
 
+# parallel=True (numba.prange), unlike the other kernels (nogil functions run by native.run_tasks): as a serial nogil
+# function this body ran 20-30 % slower on one thread, even with error_model="numpy" (docs/measurements/
+# numba-first-use/; numba compiles a prange body with noalias array arguments, the likely reason). That is worth the
+# 2-3 s of CPU that the parallel form adds to the first compilation.
 @njit(cache=True, parallel=True)
 def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi):
     """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none)."""
@@ -111,7 +115,7 @@ def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional
     r, big_r = block_size // 2, search_window // 2
     planes = padded_planes(depth, rgb, trust, r, big_r)  # shared by the re-scoring and the lattice search
     xp, tp, cp, use_t = planes
-    prev = previous_index.detach().cpu().contiguous().numpy()
+    prev = previous_index.detach().cpu().to(torch.int64).contiguous().numpy()  # int64, C order: one compiled signature
     topd = np.empty((bsz, h, w, k), dtype=xp.dtype)
     topi = np.empty((bsz, h, w, k), dtype=np.int32)
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)

@@ -5,11 +5,11 @@ from .groups import (BlockMatchingConfig, CleanSamples, EdgeRefit, EdgeSnap, Fid
                      SingularConfig, SolverConfig, StreamConfig, UpsamplingConfig, ValuePrior)
 from .overrides import apply_overrides
 from .presets import PRESETS, preset_config
-from .restorer import TERMS, RestorerConfig, load_config_file
+from .restorer import TERMS, RestorerConfig, from_version1, load_config_file
 
 __all__ = [
     "BlockMatchingConfig", "CleanSamples", "EdgeRefit", "EdgeSnap", "FidelityBand", "Guidance", "GuidedPrior",
     "InitConfig", "JBUConfig", "LayerMultipliers", "LayerWeights", "OutputHold", "PRESETS", "Refiner",
-    "RestorerConfig", "SidedFill", "SingularConfig", "SolverConfig", "StreamConfig", "TERMS", "UpsamplingConfig", "ValuePrior",
-    "apply_overrides", "load_config_file", "preset_config",
+    "RestorerConfig", "SidedFill", "SingularConfig", "SolverConfig", "StreamConfig", "TERMS", "UpsamplingConfig",
+    "ValuePrior", "apply_overrides", "from_version1", "load_config_file", "preset_config",
 ]

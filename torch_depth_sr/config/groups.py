@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Optional
 
 from ..errors import ParameterError
-from . import domains as d
+from .domains import boolean, choice, int_tuple, integer, non_negative, optional, positive, real
 
 __all__ = [
     "BlockMatchingConfig", "CleanSamples", "EdgeRefit", "EdgeSnap", "FidelityBand", "Group", "Guidance",
@@ -80,8 +80,8 @@ class LayerWeights(Group):
     mu2: float = 0.5
     isotropic: bool = False
     _NAME: ClassVar[str] = "weights"
-    _CHECKS: ClassVar[dict] = {**dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2"), d.positive),
-                               "isotropic": d.boolean}
+    _CHECKS: ClassVar[dict] = {**dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2"), positive),
+                               "isotropic": boolean}
 
 
 @dataclass(frozen=True)
@@ -104,10 +104,10 @@ class BlockMatchingConfig(Group):
     upsample_k: int = 10
     _NAME: ClassVar[str] = "block_matching"
     _CHECKS: ClassVar[dict] = {
-        "block_size": d.integer(1, odd=True), "search_window": d.integer(1, odd=True), "k": d.integer(1),
-        "include_self": d.boolean, "match_layers": d.int_tuple(0, "(2, 5) or ()"),
-        "rematch": d.choice("exact", "refine"), "rematch_lattice": d.integer(0), "color_weight": d.non_negative,
-        "temperature": d.positive, "upsample_search_window": d.integer(1, odd=True), "upsample_k": d.integer(1)}
+        "block_size": integer(1, odd=True), "search_window": integer(1, odd=True), "k": integer(1),
+        "include_self": boolean, "match_layers": int_tuple(0, "(2, 5) or ()"),
+        "rematch": choice("exact", "refine"), "rematch_lattice": integer(0), "color_weight": non_negative,
+        "temperature": positive, "upsample_search_window": integer(1, odd=True), "upsample_k": integer(1)}
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -140,8 +140,8 @@ class SingularConfig(Group):
     gate: Optional[float] = 0.002
     _NAME: ClassVar[str] = "singular"
     _CHECKS: ClassVar[dict] = {
-        "tau": d.real(0.0, 1.0), "sigma_floor": d.positive, "rounds": d.integer(1), "support": d.integer(0),
-        "support_tol": d.positive, "line_support": d.boolean, "gate": d.optional(d.real(0.0, 1.0))}
+        "tau": real(0.0, 1.0), "sigma_floor": positive, "rounds": integer(1), "support": integer(0),
+        "support_tol": positive, "line_support": boolean, "gate": optional(real(0.0, 1.0))}
 
 
 @dataclass(frozen=True)
@@ -156,9 +156,9 @@ class SolverConfig(Group):
     precondition: bool = True
     implicit_backward: bool = False
     _NAME: ClassVar[str] = "solver"
-    _CHECKS: ClassVar[dict] = {"fixed_iters": d.int_tuple(1, "(5, 3, 1), or () for a convergence test on tol"),
-                               "tol": d.positive, "max_iter": d.integer(1), "precondition": d.boolean,
-                               "implicit_backward": d.boolean}
+    _CHECKS: ClassVar[dict] = {"fixed_iters": int_tuple(1, "(5, 3, 1), or () for a convergence test on tol"),
+                               "tol": positive, "max_iter": integer(1), "precondition": boolean,
+                               "implicit_backward": boolean}
 
     def iterations(self, index: int) -> Optional[int]:
         """The fixed CG iteration count of layer ``index`` (the schedule's last entry repeats); None = to ``tol``."""
@@ -185,9 +185,9 @@ class InitConfig(Group):
     dt_iterations: int = 1
     _NAME: ClassVar[str] = "initial"
     _CHECKS: ClassVar[dict] = {
-        "fill": d.choice("domain", "jbf", "pushpull"), "keep_observed": d.boolean, "singular": d.boolean,
-        "kernel_size": d.integer(1), "sigma_space": d.positive, "sigma_color": d.positive,
-        "dt_sigma_space": d.positive, "dt_sigma_color": d.positive, "dt_iterations": d.integer(1)}
+        "fill": choice("domain", "jbf", "pushpull"), "keep_observed": boolean, "singular": boolean,
+        "kernel_size": integer(1), "sigma_space": positive, "sigma_color": positive,
+        "dt_sigma_space": positive, "dt_sigma_color": positive, "dt_iterations": integer(1)}
 
 
 @dataclass(frozen=True)
@@ -203,8 +203,8 @@ class SidedFill(Group):
     ambiguous: str = "mix"
     quantiles: Optional[tuple] = None
     _NAME: ClassVar[str] = "sided_fill"
-    _CHECKS: ClassVar[dict] = {"gap": d.positive, "min_share": d.real(0.0, 1.0), "passes": d.integer(1),
-                               "choice_sigma_space": d.optional(d.positive), "ambiguous": d.choice("mix", "take")}
+    _CHECKS: ClassVar[dict] = {"gap": positive, "min_share": real(0.0, 1.0), "passes": integer(1),
+                               "choice_sigma_space": optional(positive), "ambiguous": choice("mix", "take")}
 
     def fill_arguments(self) -> dict:
         """Keyword arguments for ``fill_holes_sided`` (all but ``ambiguous``)."""
@@ -228,8 +228,8 @@ class ValuePrior(Group):
     ridge: float = 1.0
     range: Optional[float] = 3.0
     _NAME: ClassVar[str] = "value_prior"
-    _CHECKS: ClassVar[dict] = {"weight": d.positive, "var": d.positive, "offset": d.positive,
-                               "ridge": d.non_negative, "range": d.optional(d.positive)}
+    _CHECKS: ClassVar[dict] = {"weight": positive, "var": positive, "offset": positive,
+                               "ridge": non_negative, "range": optional(positive)}
 
 
 @dataclass(frozen=True)
@@ -242,8 +242,8 @@ class CleanSamples(Group):
     value_range: Optional[float] = 1.0
     value_weight: Optional[float] = 30.0
     _NAME: ClassVar[str] = "clean_samples"
-    _CHECKS: ClassVar[dict] = {"eta": d.positive, "value_range": d.optional(d.positive),
-                               "value_weight": d.optional(d.positive)}
+    _CHECKS: ClassVar[dict] = {"eta": positive, "value_range": optional(positive),
+                               "value_weight": optional(positive)}
 
 
 @dataclass(frozen=True)
@@ -254,7 +254,7 @@ class GuidedPrior(Group):
     weight: float = 3.2
     on_singular: bool = True
     _NAME: ClassVar[str] = "guided_prior"
-    _CHECKS: ClassVar[dict] = {"weight": d.positive, "on_singular": d.boolean}
+    _CHECKS: ClassVar[dict] = {"weight": positive, "on_singular": boolean}
 
 
 @dataclass(frozen=True)
@@ -264,7 +264,7 @@ class FidelityBand(Group):
 
     width: float = 4.0
     _NAME: ClassVar[str] = "fidelity"
-    _CHECKS: ClassVar[dict] = {"width": d.positive}
+    _CHECKS: ClassVar[dict] = {"width": positive}
 
 
 @dataclass(frozen=True)
@@ -276,8 +276,8 @@ class JBUConfig(Group):
     sigma_color: float = 0.1
     first_order: bool = True
     _NAME: ClassVar[str] = "upsampling.jbu"
-    _CHECKS: ClassVar[dict] = {"radius": d.integer(0), "sigma_space": d.positive, "sigma_color": d.positive,
-                               "first_order": d.boolean}
+    _CHECKS: ClassVar[dict] = {"radius": integer(0), "sigma_space": positive, "sigma_color": positive,
+                               "first_order": boolean}
 
 
 @dataclass(frozen=True)
@@ -290,7 +290,7 @@ class LayerMultipliers(Group):
     mu1: float = 3.0
     mu2: float = 3.0
     _NAME: ClassVar[str] = "upsampling.multipliers"
-    _CHECKS: ClassVar[dict] = dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2"), d.positive)
+    _CHECKS: ClassVar[dict] = dict.fromkeys(("lam", "eta", "gamma", "mu1", "mu2"), positive)
 
 
 @dataclass(frozen=True)
@@ -308,9 +308,9 @@ class UpsamplingConfig(Group):
     jbu: JBUConfig = field(default_factory=JBUConfig)
     multipliers: LayerMultipliers = field(default_factory=LayerMultipliers)
     _NAME: ClassVar[str] = "upsampling"
-    _CHECKS: ClassVar[dict] = {"init": d.choice("jbu", "bicubic"), "init_band": d.non_negative,
-                               "init_edge_band": d.non_negative, "init_consistency": d.non_negative,
-                               "tv_per_factor": d.boolean}
+    _CHECKS: ClassVar[dict] = {"init": choice("jbu", "bicubic"), "init_band": non_negative,
+                               "init_edge_band": non_negative, "init_consistency": non_negative,
+                               "tv_per_factor": boolean}
     _NESTED: ClassVar[dict] = {"jbu": JBUConfig, "multipliers": LayerMultipliers}
 
 
@@ -323,7 +323,7 @@ class OutputHold(Group):
     edge: float = 1.0
     edge_threshold: float = 16.0
     _NAME: ClassVar[str] = "upsample_hold"
-    _CHECKS: ClassVar[dict] = {"band": d.positive, "edge": d.non_negative, "edge_threshold": d.non_negative}
+    _CHECKS: ClassVar[dict] = {"band": positive, "edge": non_negative, "edge_threshold": non_negative}
 
 
 @dataclass(frozen=True)
@@ -339,9 +339,9 @@ class EdgeSnap(Group):
     sigma_color: float = 0.235
     sigma_space: Optional[float] = None
     _NAME: ClassVar[str] = "edge_snap"
-    _CHECKS: ClassVar[dict] = {"rounds": d.integer(1), "radius": d.integer(1),
-                               "share": d.real(0.5, 1.0, lo_open=False, hi_open=True), "sigma_color": d.positive,
-                               "sigma_space": d.optional(d.positive)}
+    _CHECKS: ClassVar[dict] = {"rounds": integer(1), "radius": integer(1),
+                               "share": real(0.5, 1.0, lo_open=False, hi_open=True), "sigma_color": positive,
+                               "sigma_space": optional(positive)}
 
 
 @dataclass(frozen=True)
@@ -355,8 +355,8 @@ class EdgeRefit(Group):
     edge: float = 2.0
     sigma_color: float = 0.235
     _NAME: ClassVar[str] = "edge_refit"
-    _CHECKS: ClassVar[dict] = {"radius": d.integer(1), "band": d.positive, "edge": d.non_negative,
-                               "sigma_color": d.positive}
+    _CHECKS: ClassVar[dict] = {"radius": integer(1), "band": positive, "edge": non_negative,
+                               "sigma_color": positive}
 
 
 @dataclass(frozen=True)
@@ -367,7 +367,7 @@ class Guidance(Group):
     channels: int = 16
     range: float = 4.0
     _NAME: ClassVar[str] = "guidance"
-    _CHECKS: ClassVar[dict] = {"channels": d.integer(1), "range": d.real(1.0, lo_open=False)}
+    _CHECKS: ClassVar[dict] = {"channels": integer(1), "range": real(1.0, lo_open=False)}
 
 
 @dataclass(frozen=True)
@@ -379,8 +379,8 @@ class Refiner(Group):
     layers: int = 6
     task: str = "upsample"
     _NAME: ClassVar[str] = "refiner"
-    _CHECKS: ClassVar[dict] = {"channels": d.integer(1), "layers": d.integer(0),
-                               "task": d.choice("upsample", "denoise")}
+    _CHECKS: ClassVar[dict] = {"channels": integer(1), "layers": integer(0),
+                               "task": choice("upsample", "denoise")}
 
 
 @dataclass(frozen=True)
@@ -418,8 +418,8 @@ class StreamConfig(Group):
     dilate: int = 2
     reuse_matches: bool = True
     _NAME: ClassVar[str] = "stream"
-    _CHECKS: ClassVar[dict] = {"weight": d.positive, "max_frames": d.positive, "unmeasured_frames": d.non_negative,
-                               "hole_decay": d.real(0.0, 1.0, False), "fill_evidence": d.positive,
-                               "depth_test": d.positive, "camera_test": d.optional(d.real(0.0, 1.0)),
-                               "outlier_test": d.optional(d.positive), "color_test": d.positive,
-                               "window": d.integer(1, odd=True), "dilate": d.integer(0), "reuse_matches": d.boolean}
+    _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
+                               "hole_decay": real(0.0, 1.0, False), "fill_evidence": positive,
+                               "depth_test": positive, "camera_test": optional(real(0.0, 1.0)),
+                               "outlier_test": optional(positive), "color_test": positive,
+                               "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean}

@@ -7,8 +7,8 @@ import dataclasses
 from typing import Any, Optional
 
 from ..errors import ParameterError
-from .restorer import RestorerConfig
-from .version1 import FLAT_FIELDS, flat_changes
+from .restorer import RestorerConfig, from_version1
+from .version1 import _SETS, FLAT_FIELDS, to_version1
 
 __all__ = ["apply_overrides"]
 
@@ -24,7 +24,7 @@ def apply_overrides(config: RestorerConfig, overrides: Optional[dict]) -> Restor
       the form above);
     * version 1, the flat field names of the files written before 2026-12-03: ``{"k": 10, "snap_rounds": 0}``,
       each changing the group it belonged to as version 1 would have, sentinels included
-      (:func:`~torch_depth_sr.config.version1.flat_changes`); groups not named keep ``config``'s settings.
+      (:func:`flat_changes`); groups not named keep ``config``'s settings.
 
     ``"version": 1`` or ``2`` in the dict says which; without it the keys decide (``num_layers`` and
     ``degradation`` are in both; ``guided_prior`` is version 1 when its value is a number). A dict mixing
@@ -90,4 +90,50 @@ def _nested(values: dict) -> dict:
                 raise ParameterError(".".join(path[:i + 1]), node, "a dict of fields to change when "
                                      f"{key!r} is given too", "Give the group either whole or by dotted paths.")
         node[last] = v
+    return out
+
+
+def flat_changes(values: dict, base: Optional[RestorerConfig] = None) -> dict:
+    """The version-2 changes (:meth:`RestorerConfig.replace <torch_depth_sr.config.RestorerConfig.replace>`
+    arguments) that a partial version-1 flat dict makes to ``base`` (default: the defaults).
+
+    Each version-1 field changes the group(s) it belonged to as version 1 would have: the group is read back to its
+    version-1 fields, the given ones replace them, and the group is converted again, so sentinels switch a step
+    off (``snap_rounds=0`` -> ``edge_snap=None``), a sentinel's opposite on again (merged into the group's
+    defaults), and a setting of a group that is off leaves it off. Groups the dict does not touch keep ``base``'s
+    settings exactly. A group that stays on comes back as a dict of the fields that change.
+
+    Examples:
+        >>> flat_changes({"k": 10, "snap_rounds": 0})
+        {'block_matching': {'k': 10}, 'edge_snap': None}
+    """
+    if not isinstance(values, dict):
+        raise ParameterError("version-1 settings", values, "a dict of version-1 RestorerConfig fields")
+    unknown = set(values) - FLAT_FIELDS
+    if unknown:
+        raise ParameterError("keys", sorted(unknown),
+                             f"version-1 RestorerConfig fields ({', '.join(sorted(FLAT_FIELDS))})",
+                             "Remove or rename the unknown keys.")
+    base = RestorerConfig() if base is None else base
+    new = from_version1({**to_version1(base), **values})
+    changes: dict = {}
+    for key in values:
+        for name in _SETS[key]:
+            old, now = getattr(base, name), getattr(new, name)
+            if name in changes or old == now:
+                continue
+            if now is None or not hasattr(now, "to_dict"):  # off, or a top-level value
+                changes[name] = now
+            else:  # merged into the current group, or into the group's defaults when it was off
+                changes[name] = _differences(type(now)() if old is None else old, now)
+    return changes
+
+
+def _differences(old, new) -> dict:
+    """The fields of group ``new`` that differ from group ``old`` (nested groups as dicts of theirs)."""
+    out = {}
+    for k, x in new.to_dict().items():
+        was, now = getattr(old, k), getattr(new, k)
+        if was != now:
+            out[k] = _differences(was, now) if hasattr(now, "to_dict") else now
     return out

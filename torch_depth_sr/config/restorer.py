@@ -10,12 +10,13 @@ from pathlib import Path
 from typing import Any, ClassVar, Optional
 
 from ..errors import ModelFileError, ParameterError
-from . import domains as d
+from .domains import choice, integer, str_tuple
+from .version1 import FLAT_FIELDS, version1_settings
 from .groups import (BlockMatchingConfig, CleanSamples, EdgeRefit, EdgeSnap, FidelityBand, Group, Guidance,
                      GuidedPrior, InitConfig, LayerWeights, OutputHold, Refiner, SidedFill, SingularConfig,
                      SolverConfig, StreamConfig, UpsamplingConfig, ValuePrior)
 
-__all__ = ["RestorerConfig", "TERMS", "load_config_file"]
+__all__ = ["RestorerConfig", "TERMS", "from_version1", "load_config_file"]
 
 TERMS = ("nonlocal", "outliers", "singular")
 """The terms of the paper's objective a layer may switch off (TV and the data term are always there):
@@ -66,9 +67,9 @@ class RestorerConfig:
         """Refuse any field outside its domain, naming the field, the value and what is allowed."""
         if isinstance(self.terms, list):
             object.__setattr__(self, "terms", tuple(self.terms))
-        d.integer(1)("num_layers", self.num_layers)
-        d.choice("area", "bicubic")("degradation", self.degradation)
-        d.str_tuple(*TERMS)("terms", self.terms)
+        integer(1)("num_layers", self.num_layers)
+        choice("area", "bicubic")("degradation", self.degradation)
+        str_tuple(*TERMS)("terms", self.terms)
         for name, kind in _GROUPS.items():
             v = getattr(self, name)
             if isinstance(v, dict):
@@ -114,9 +115,7 @@ class RestorerConfig:
     def from_dict(cls, values: dict) -> "RestorerConfig":
         """Build from :meth:`to_dict`'s form (``"version": 2``; fields left out keep their defaults) or from a
         version-1 flat dict (no ``"version"`` or ``"version": 1``), converted with exactly the defaults it had
-        (:func:`~torch_depth_sr.config.version1.from_version1`). Every value is checked (ParameterError)."""
-        from .version1 import FLAT_FIELDS, from_version1
-
+        (:func:`from_version1`). Every value is checked (ParameterError)."""
         if not isinstance(values, dict):
             raise ParameterError("a RestorerConfig", values, "a dict (a JSON object) of settings")
         version = values.get("version", 1 if set(values) & (FLAT_FIELDS - _TOP_LEVEL) else cls.VERSION)
@@ -139,6 +138,17 @@ _GROUPS: dict = {f.name: t for f, t in zip(dataclasses.fields(RestorerConfig), (
 _OPTIONAL = {"sided_fill", "value_prior", "clean_samples", "guided_prior", "fidelity", "upsample_hold", "edge_snap",
              "edge_refit", "guidance", "refiner", "stream"}
 _TOP_LEVEL = {"num_layers", "degradation"}
+
+
+def from_version1(values: dict) -> RestorerConfig:
+    """The :class:`RestorerConfig` of a version-1 flat dict (some or all of its 80 fields), with exactly the defaults
+    a version-1 file had (:func:`~torch_depth_sr.config.version1.version1_settings`).
+
+    Examples:
+        >>> from_version1({"snap_rounds": 0, "k": 10}).edge_snap is None
+        True
+    """
+    return RestorerConfig(**version1_settings(values))
 
 
 def _plain(v: Any) -> Any:

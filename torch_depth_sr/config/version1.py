@@ -1,18 +1,15 @@
 """Version-1 configurations: one flat object of 80 fields (``config.json`` files written before 2026-12-03, and the
-shipped models trained then). :func:`from_version1` converts one to a :class:`~torch_depth_sr.config.RestorerConfig`
+shipped models trained then). :func:`version1_settings` converts one to the arguments of a :class:`~torch_depth_sr.config.RestorerConfig`
 with exactly the defaults such a file had when it was written: a field a file leaves out takes the version-1
 default below (not a later default), and a sentinel that switched a step off (``snap_rounds=0``,
 ``nl_value_weight=0``, ``fidelity_band=0``, ...) becomes that group's ``None``."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any, Optional
+from typing import Any
 
 from ..errors import ParameterError
 
-if TYPE_CHECKING:
-    from .restorer import RestorerConfig
-
-__all__ = ["FLAT_FIELDS", "VERSION1_DEFAULTS", "flat_changes", "from_version1", "to_version1"]
+__all__ = ["FLAT_FIELDS", "VERSION1_DEFAULTS", "to_version1", "version1_settings"]
 
 # the version-1 defaults, as they stood when the format was retired (commit 046c797)
 VERSION1_DEFAULTS: dict = dict(
@@ -46,11 +43,10 @@ _UNIT_MULTIPLIERS = dict(lam=1.0, eta=1.0, gamma=1.0, mu1=1.0, mu2=1.0)
 _SIDED = dict(gap=4.0, min_share=0.75, passes=8, choice_sigma_space=1.5, ambiguous="mix")
 
 
-def from_version1(values: dict) -> "RestorerConfig":
-    """The version-2 :class:`~torch_depth_sr.config.RestorerConfig` of a version-1 flat dict (some or all of
+def version1_settings(values: dict) -> dict:
+    """The version-2 settings (:class:`~torch_depth_sr.config.RestorerConfig`'s arguments, groups as dicts) of a
+    version-1 flat dict (some or all of
     :data:`FLAT_FIELDS`; the rest take :data:`VERSION1_DEFAULTS`)."""
-    from .restorer import RestorerConfig
-
     unknown = set(values) - FLAT_FIELDS
     if unknown:
         raise ParameterError("keys", sorted(unknown), f"version-1 RestorerConfig fields ({', '.join(sorted(FLAT_FIELDS))})",
@@ -72,7 +68,7 @@ def from_version1(values: dict) -> "RestorerConfig":
     if v["eta_clean"] != 1.0 or v["nl_value_range_clean"] != 0 or v["nl_value_weight_clean"] != 0:
         clean = dict(eta=v["eta_clean"], value_range=_off_at_zero(v["nl_value_range_clean"]),
                      value_weight=_off_at_zero(v["nl_value_weight_clean"]))
-    return RestorerConfig(
+    return dict(
         num_layers=v["num_layers"], degradation=v["degradation"], terms=terms,
         weights=dict(lam=v["lam"], eta=v["eta"], gamma=v["gamma"], mu1=v["mu1"], mu2=v["mu2"],
                      isotropic=v["isotropic"]),
@@ -136,10 +132,10 @@ def _dict_field(v: Any, name: str) -> dict:
     return v
 
 
-def to_version1(config: "RestorerConfig") -> dict:
+def to_version1(config: Any) -> dict:
     """The version-1 flat view of a :class:`~torch_depth_sr.config.RestorerConfig`: every field of
     :data:`FLAT_FIELDS`, a group that is off written as its version-1 sentinel (``snap_rounds=0``, ...) and the
-    other fields of such a group at their version-1 defaults. :func:`from_version1` of it gives ``config`` back
+    other fields of such a group at their version-1 defaults. :func:`~torch_depth_sr.config.from_version1` of it gives ``config`` back
     wherever version 1 can say it (not: edge refit and edge snap with different colour sigmas, settings of a group
     that is off)."""
     c, v = config, dict(VERSION1_DEFAULTS)
@@ -243,50 +239,3 @@ _SETS: dict = {
     **dict.fromkeys(("cg_fixed_iters", "cg_tol", "cg_max_iter", "precondition", "implicit_backward"), ("solver",)),
     "extra": ("sided_fill",),
 }
-
-def flat_changes(values: dict, base: Optional["RestorerConfig"] = None) -> dict:
-    """The version-2 changes (:meth:`RestorerConfig.replace <torch_depth_sr.config.RestorerConfig.replace>`
-    arguments) that a partial version-1 flat dict makes to ``base`` (default: the defaults).
-
-    Each version-1 field changes the group(s) it belonged to as version 1 would have: the group is read back to its
-    version-1 fields, the given ones replace them, and the group is converted again, so sentinels switch a step
-    off (``snap_rounds=0`` -> ``edge_snap=None``), a sentinel's opposite on again (merged into the group's
-    defaults), and a setting of a group that is off leaves it off. Groups the dict does not touch keep ``base``'s
-    settings exactly. A group that stays on comes back as a dict of the fields that change.
-
-    Examples:
-        >>> flat_changes({"k": 10, "snap_rounds": 0})
-        {'block_matching': {'k': 10}, 'edge_snap': None}
-    """
-    from .restorer import RestorerConfig
-
-    if not isinstance(values, dict):
-        raise ParameterError("version-1 settings", values, "a dict of version-1 RestorerConfig fields")
-    unknown = set(values) - FLAT_FIELDS
-    if unknown:
-        raise ParameterError("keys", sorted(unknown),
-                             f"version-1 RestorerConfig fields ({', '.join(sorted(FLAT_FIELDS))})",
-                             "Remove or rename the unknown keys.")
-    base = RestorerConfig() if base is None else base
-    new = from_version1({**to_version1(base), **values})
-    changes: dict = {}
-    for key in values:
-        for name in _SETS[key]:
-            old, now = getattr(base, name), getattr(new, name)
-            if name in changes or old == now:
-                continue
-            if now is None or not hasattr(now, "to_dict"):  # off, or a top-level value
-                changes[name] = now
-            else:  # merged into the current group, or into the group's defaults when it was off
-                changes[name] = _differences(type(now)() if old is None else old, now)
-    return changes
-
-
-def _differences(old, new) -> dict:
-    """The fields of group ``new`` that differ from group ``old`` (nested groups as dicts of theirs)."""
-    out = {}
-    for k, x in new.to_dict().items():
-        was, now = getattr(old, k), getattr(new, k)
-        if was != now:
-            out[k] = _differences(was, now) if hasattr(now, "to_dict") else now
-    return out

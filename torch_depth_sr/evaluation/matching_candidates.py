@@ -51,7 +51,7 @@ def _recording(matcher, calls: list):
 
     def record(x, obs, q, previous):
         m = original(x, obs, q, previous)
-        calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if obs.K.is_identity else None,
+        calls.append(dict(x=x.detach().clone(), trust=q.detach().clone() if obs.task == "denoise" else None,
                           rgb=obs.rgb, previous=previous, exact=m))
         return m
 

@@ -27,7 +27,7 @@ from pathlib import Path, PurePosixPath
 from typing import Iterable, Optional, Union
 
 from ..errors import UsageError
-from ..restore_files import DEPTH_EXTS, RGB_EXTS, _pair_folders
+from ..datasets.files import DEPTH_EXTS, RGB_EXTS, pair_folders
 
 __all__ = ["Frame", "Sequence", "LAYOUTS", "discover_recordings", "associate_timestamps", "recording_layout"]
 
@@ -291,7 +291,7 @@ def _read_folder(folder: Path, name: str, tol: float) -> Sequence:
                          f"({', '.join(c.name + '/' for c in colour)}); keep one next to depth/")
     rgb_dir = colour[0] if colour else None
     try:
-        depths, rgbs = _pair_folders(folder / "depth", rgb_dir)
+        depths, rgbs = pair_folders(folder / "depth", rgb_dir)
     except UsageError as e:
         raise UsageError(f"the recording '{folder}': {e}") from e
     return _sequence(folder, name, "folder", [(None, d, c, f"'{d}'") for d, c in zip(depths, rgbs)])

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Sequence as Seq, Union
 
 from ..errors import UsageError
-from ..restore_files import _check_writable, _files, _identity
+from ..datasets.files import check_writable, describe_files, file_identity
 from .layouts import TUM_MAX_DIFFERENCE, Sequence, discover_recordings
 from .manifest import MANIFEST_NAME, latest_records, manifest_files
 
@@ -91,10 +91,10 @@ def plan_dataset(recordings: Union[str, Path, Seq[Sequence]], out: Union[str, Pa
                 existing.append(o)
         tasks.append(SequenceTask(s, tuple(outs), tuple(write), tuple(attempts), out))
     if existing:
-        raise UsageError(f"{_files(existing)} already exist{'s' if len(existing) == 1 else ''} and no manifest of "
+        raise UsageError(f"{describe_files(existing)} already exist{'s' if len(existing) == 1 else ''} and no manifest of "
                          f"'{out}' records {'it' if len(existing) == 1 else 'them'}; add --overwrite to replace, or "
                          "choose another output folder (nothing was written)")
-    _check_writable(out / MANIFEST_NAME)
+    check_writable(out / MANIFEST_NAME)
     if overwrite and not resume:
         for p in files:
             with contextlib.suppress(FileNotFoundError):
@@ -108,7 +108,7 @@ def _check_outputs(sequences: list[Sequence], outputs: list[list[Path]]) -> None
         for f in s.frames:
             for p in (f.depth_path, f.rgb_path):
                 if p is not None:
-                    inputs[_identity(p)] = p
+                    inputs[file_identity(p)] = p
     seen: dict[str, Path] = {}
     for s, outs in zip(sequences, outputs):
         for f, o in zip(s.frames, outs):
@@ -117,7 +117,7 @@ def _check_outputs(sequences: list[Sequence], outputs: list[list[Path]]) -> None
                 raise UsageError(f"frames '{seen[key]}' and '{f.depth_path}' would both be written to '{o}'; give "
                                  "the depth files of a recording distinct names")
             seen[key] = f.depth_path
-            replaced = inputs.get(_identity(o)) if o.exists() else None
+            replaced = inputs.get(file_identity(o)) if o.exists() else None
             if replaced is not None:
                 raise UsageError(f"the output '{o}' would replace the input '{replaced}'; choose an output folder "
                                  "outside the recordings (inputs are never replaced)")

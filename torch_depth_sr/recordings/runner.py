@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from ..datasets.io import read_depth_stored, read_rgb, write_depth
 from ..errors import DepthSRError, describe_error
-from ..restore_files import _as_numpy, _stored_layout, _to_model_input, _with_path
+from ..datasets.files import as_numpy, stored_layout, to_model_input, with_path
 from .manifest import ManifestWriter
 from .plan import SequenceTask
 from .restorers import Restorer
@@ -61,13 +61,13 @@ def run_task(task: SequenceTask, restorer: Restorer, emit: Callable[[tuple], Non
         try:
             depth = read_depth_stored(frame.depth_path)
             rgb = None if frame.rgb_path is None else torch.from_numpy(read_rgb(frame.rgb_path)).permute(2, 0, 1)
-            restored = restorer.step(_to_model_input(depth), rgb)
+            restored = restorer.step(to_model_input(depth), rgb)
             if write:
-                restored = _as_numpy(restored).astype(depth.dtype, copy=False)
+                restored = as_numpy(restored).astype(depth.dtype, copy=False)
                 task.outputs[i].parent.mkdir(parents=True, exist_ok=True)
-                write_depth(task.outputs[i], _stored_layout(restored, frame.depth_path))
+                write_depth(task.outputs[i], stored_layout(restored, frame.depth_path))
         except Exception as e:  # noqa: BLE001 - one bad frame is recorded; the sequence goes on
-            error = _with_path(e, frame.depth_path, describe_error(e))
+            error = with_path(e, frame.depth_path, describe_error(e))
         if not write:
             emit(("step", s.name, None))
             continue

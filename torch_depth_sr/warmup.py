@@ -1,0 +1,104 @@
+"""``torch-depth-sr warmup``: compile every numba CPU kernel the forward can call into numba's on-disk cache ahead
+of the first forward (``make install`` runs it). The kernels and their loading live in :mod:`torch_depth_sr.native`;
+this module runs each kernel once on a small input, as the forward calls it."""
+from __future__ import annotations
+
+import time
+from typing import Callable, Optional, Sequence
+
+import torch
+
+from .block_matching import block_match
+from .block_matching.refine import refine_matches
+from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
+from .nonlocal_prior import nonlocal_terms
+from .operators import grad
+from .singular import detect_singular
+
+__all__ = ["warmup"]
+
+
+def _warmup_steps(dtype: torch.dtype):
+    """``(label, call)``: each kernel wrapper on a small synthetic input, as the forward calls it (the wrappers cast
+    and copy their inputs to C-contiguous float32/float64 arrays, so these are every signature they compile)."""
+    g = torch.Generator().manual_seed(0)
+    x = torch.rand(1, 1, 16, 20, generator=g, dtype=dtype)
+    rgb = torch.rand(1, 3, 16, 20, generator=g, dtype=dtype)
+    trust = (torch.rand(1, 1, 16, 20, generator=g) > 0.1).to(dtype)
+    kw = dict(block_size=3, search_window=7, k=4)
+    held = {}
+
+    def matching():
+        held["m"] = block_match(x, rgb, trust, **kw, backend="numba")
+
+    def rematching():  # the candidates' re-ranking, then the lattice search seeded with them
+        refine_matches(x, held["m"], rgb, None, **kw, reach=1, lattice=2)
+
+    def terms():
+        with torch.no_grad():
+            nonlocal_terms(x, grad(x), held["m"], value_weight=1.0, plane_ridge=0.1, range_sigma=1.0)
+
+    def singular():
+        detect_singular(x, x, trust, held["m"], sigma_floor=0.1, rounds=2, backend="numba")
+
+    return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
+            ("singular test", singular)]
+
+
+def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),
+           log: Optional[Callable[[str], None]] = None) -> dict:
+    """Compile every numba CPU kernel the forward can call, for each dtype, into numba's on-disk cache (or load it
+    from there when an earlier run did): after it a forward compiles nothing. Idempotent; a second run only loads.
+
+    Each kernel runs once on a small input with one thread (the serial paths) and with two (the parallel paths;
+    one where numba has a single thread). ``log`` receives one line per step.
+
+    Returns:
+        ``{"compiled": n, "loaded": n, "seconds": s, "cache": path, "steps": [(dtype, label, compiled, loaded, s),
+        ...]}``: the kernel signatures compiled now and those loaded from the cache (numba's helpers not counted).
+
+    Raises:
+        DepthSRError: numba is missing, broken or turned off (``TORCH_DEPTH_SR_NO_NUMBA``).
+    """
+    cpu_kernel("singular_kernel", "singular_rounds_cpu", required=True)  # numba importable and enabled, or raise
+    from numba.core import event
+
+    class _Count(event.Listener):
+        n = 0
+
+        def on_start(self, ev):
+            if _ours(ev):
+                _Count.n += 1
+
+        def on_end(self, ev):
+            pass
+
+    disp = _dispatchers()
+
+    def loaded() -> int:
+        return sum(sum(d.stats.cache_hits.values()) for d in disp.values())
+
+    threads = torch.get_num_threads()
+    steps = []
+    t0, hits0 = time.perf_counter(), loaded()
+    _NOTICE["quiet"] = True
+    try:
+        with event.install_listener("numba:compile", _Count()):
+            for dt in dtypes:
+                for label, call in _warmup_steps(dt):
+                    n0, h0, s0 = _Count.n, loaded(), time.perf_counter()
+                    for n in (max(2, threads), 1):
+                        torch.set_num_threads(n)
+                        call()
+                    st = (str(dt).replace("torch.", ""), label, _Count.n - n0, loaded() - h0, time.perf_counter() - s0)
+                    steps.append(st)
+                    if log is not None:
+                        what = [f"compiled {st[2]}"] if st[2] else []
+                        what += [f"loaded {st[3]} from the cache"] if st[3] else []
+                        log(f"{st[0]:<8} {st[1]:<15} {st[4]:6.1f} s  "
+                            + (", ".join(what) if what else "already compiled in this process"))
+    finally:
+        _NOTICE["quiet"] = False
+        torch.set_num_threads(threads)
+    return {"compiled": _Count.n, "loaded": loaded() - hits0, "seconds": time.perf_counter() - t0,
+            "cache": kernel_cache_dir(), "steps": steps}
