@@ -104,7 +104,7 @@ def test_version2_forms():
     base = preset_config("fast")
     nested = apply_overrides(base, {"block_matching": {"k": 6}, "edge_snap": None, "num_layers": 4})
     assert nested == base.replace(block_matching={"k": 6}, edge_snap=None, num_layers=4)
-    assert nested.block_matching.search_window == 11  # merged into the base's group
+    assert nested.block_matching.search_window == base.block_matching.search_window == 7  # merged into the base's group
     dotted = apply_overrides(base, {"block_matching.k": 6, "edge_snap": None, "num_layers": 4})
     assert dotted == nested
     assert apply_overrides(base, {"upsampling.jbu.radius": 3, "upsampling": {"init_band": 1.0}}) == base.replace(

@@ -164,10 +164,10 @@ class TestDepthRestorer:
             DepthRestorer(upsampling={"multipliers": bad})
 
     def test_fast_preset_is_close_to_the_default_and_overridable(self, scene):
-        fast = DepthRestorer.from_preset("fast")
-        assert fast.config.block_matching.search_window == 11 and fast.config.block_matching.match_layers == (2,)
+        fast = DepthRestorer.from_preset("fast")  # the fast speed tier: a trained 3-layer model (issue 27)
+        assert fast.config.block_matching.search_window == 7 and fast.config.block_matching.match_layers == ()
         six = DepthRestorer.from_preset("fast", block_matching={"k": 6}).config.block_matching
-        assert six.k == 6 and six.search_window == 11  # the override merges into the preset's group
+        assert six.k == 6 and six.search_window == 7  # the override merges into the preset's group
         a = rmse(DepthRestorer()(scene["depth"], scene["rgb"]), scene["gt"], scene["mask"])
         b = rmse(fast(scene["depth"], scene["rgb"]), scene["gt"], scene["mask"])
         assert b < 1.1 * a
@@ -354,7 +354,7 @@ def test_clean_sample_settings_act_only_on_samples_the_singular_gate_finds_clean
 
 
 def test_k_is_limited_to_the_candidates_every_pixel_has():
-    """The default k (40) exceeds what a 6×6 image or the fast preset's 11×11 window offers at a corner (35):
+    """The default k (40) exceeds what a 6×6 image or the fast tier's 7×7 window offers at a corner (35):
     the stage matches all of them instead of refusing the image."""
     from torch_depth_sr import DepthRestorer
     from torch_depth_sr.block_matching._common import candidates_everywhere
@@ -364,7 +364,9 @@ def test_k_is_limited_to_the_candidates_every_pixel_has():
     y = 50 + torch.randn(1, 1, 6, 6, generator=g)
     out = DepthRestorer(num_layers=2)(y, torch.rand(1, 3, 6, 6, generator=g))
     assert out.shape == y.shape and bool(torch.isfinite(out).all())
-    assert DepthRestorer.from_preset("fast", num_layers=1)(y, None).shape == y.shape
+    from torch_depth_sr.config import preset_config
+
+    assert DepthRestorer(preset_config("fast", num_layers=1, refiner=None))(y, None).shape == y.shape  # 7×7 window
 
 
 def test_guided_upsampling_matches_with_its_own_window_and_k():
@@ -373,6 +375,6 @@ def test_guided_upsampling_matches_with_its_own_window_and_k():
 
     bm = RestorerConfig().block_matching
     assert bm.window_and_k() == {"denoise": (15, 40), "upsample": (21, 10)}
-    assert preset_config("fast").block_matching.window_and_k()["upsample"] == (11, 10)
+    assert preset_config("fast").block_matching.window_and_k() == {"denoise": (7, 10), "upsample": (21, 10)}
     with pytest.raises(ValueError, match="upsample_k"):
         RestorerConfig().replace(block_matching={"upsample_search_window": 3})

@@ -121,6 +121,14 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
         >>> snap_to_sides(x, rgb, rounds=1, radius=2)[0, 0, 1].tolist()
         [0.0, 0.0, 10.0, 10.0, 10.0]
     """
+    if _no_sample_active(active, x):  # nothing may move: the result is x (no window of any sample is sorted)
+        return x
+    some = _some_samples_active(active, x)
+    if some is not None:  # only the active samples' windows (each sample's result depends on its own only)
+        g = guide if guide.shape[0] == 1 else guide[some]
+        out = x.clone()
+        out[some] = snap_to_sides(x[some], g, rounds, radius, share, sigma_color, sigma_space)
+        return out
     for _ in range(int(rounds)):
         median, side_share = sided_median(x, guide, radius, sigma_color, sigma_space)
         move = side_share > share
@@ -128,6 +136,24 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
             move = move & active
         x = torch.where(move, median, x)
     return x
+
+
+def _no_sample_active(active: Optional[torch.Tensor], x: torch.Tensor) -> bool:
+    """Whether a per-sample ``active`` (B,1,1,1) says that no sample may change, checked on the CPU only: there
+    reading it costs nothing, while on a GPU it would make the host wait for the device (the step then runs and
+    changes nothing)."""
+    if active is None or x.device.type != "cpu" or active.shape[-2:] != (1, 1):
+        return False
+    return not bool(active.any())
+
+
+def _some_samples_active(active: Optional[torch.Tensor], x: torch.Tensor) -> Optional[torch.Tensor]:
+    """The indices of the active samples when a per-sample ``active`` leaves some out (CPU only, as above), else
+    None."""
+    if active is None or x.device.type != "cpu" or active.shape[-2:] != (1, 1) or active.shape[0] != x.shape[0]:
+        return None
+    a = active.reshape(-1)
+    return None if bool(a.all()) else a.nonzero()[:, 0]
 
 
 def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor,
@@ -152,6 +178,8 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     check_4d(x, "x", channels=1)
     check_same_hw(x, y, "x", "y")
     check_same_hw(x, guide, "x", "guide")
+    if _no_sample_active(active, x):  # nothing may change: the result is x
+        return x
     b, _, h, w = x.shape
     r = int(radius)
     near_edge = (F.max_pool2d(x, 5, 1, 2) + F.max_pool2d(-x, 5, 1, 2)) > edge
@@ -162,21 +190,25 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     where = near_edge.nonzero()
     if where.shape[0] == 0:
         return x
-    yp = F.pad(torch.where(observed > 0, y, torch.zeros_like(y)), (r, r, r, r))
-    op = F.pad((observed > 0).to(x.dtype), (r, r, r, r))
+    yp = F.pad(torch.where(observed > 0, y, torch.zeros_like(y)), (r, r, r, r)).reshape(-1)
+    op = F.pad((observed > 0).to(x.dtype), (r, r, r, r)).reshape(-1)
     gp = F.pad(guide.to(x), (r, r, r, r), mode="replicate")
-    offsets = torch.tensor([(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)], device=x.device)
-    out = x.clone()
+    # the padded planes read by one flat index per window pixel (the same values as indexing by sample, row and
+    # column, several times faster); the colour with its channels last, one row per padded pixel
+    hp, wp = h + 2 * r, w + 2 * r
+    colour_rows = gp.expand(b, -1, hp, wp).permute(0, 2, 3, 1).reshape(b * hp * wp, -1)
+    offsets = torch.tensor([dy * wp + dx for dy in range(-r, r + 1) for dx in range(-r, r + 1)], device=x.device)
+    out = x.clone(memory_format=torch.contiguous_format)
+    flat_out, flat_x = out.view(-1), x.reshape(-1)
     for start in range(0, where.shape[0], _PIXELS_PER_CHUNK):
         bi, _, ri, ci = where[start:start + _PIXELS_PER_CHUNK].unbind(1)
-        rows = ri[:, None] + r + offsets[None, :, 0]  # (n, window) in the padded frame
-        cols = ci[:, None] + r + offsets[None, :, 1]
-        bb = bi[:, None].expand_as(rows)
-        values, votes = yp[bb, 0, rows, cols], op[bb, 0, rows, cols]
-        centre = x[bi, 0, ri, ci][:, None]
-        colour = gp[bb, :, rows, cols]  # (n, window, C)
-        distance = (colour - gp[bi, :, ri + r, ci + r][:, None, :]).abs().sum(-1)
+        centre_index = (bi * hp + ri + r) * wp + ci + r  # (n,) in the padded frame
+        window = centre_index[:, None] + offsets[None, :]  # (n, window)
+        values, votes = yp[window], op[window]
+        out_index = (bi * h + ri) * w + ci
+        centre = flat_x[out_index][:, None]
+        distance = (colour_rows[window] - colour_rows[centre_index][:, None, :]).abs().sum(-1)  # (n, window)
         weight = _colour_weight(distance, sigma_color) * votes * ((values - centre).abs() <= band)
         median, total = _weighted_median(values, weight)
-        out[bi, 0, ri, ci] = torch.where(total > 1.0, median, centre[:, 0])
+        flat_out[out_index] = torch.where(total > 1.0, median, centre[:, 0])
     return out

@@ -27,7 +27,7 @@ from torch import nn
 
 from ._checks import check_scale_factor
 from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
-from .config import RestorerConfig, load_config_file, preset_config
+from .config import TRAINED_PRESETS, RestorerConfig, load_config_file, preset_config
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .guidance import GuidanceNet, NoGuidance
 from .initial import InitialEstimate, initial_stages
@@ -124,16 +124,20 @@ class DepthRestorer(nn.Module):
 
     @classmethod
     def from_preset(cls, name: str, trainable: bool = False, **overrides) -> "DepthRestorer":
-        """The named configuration ``name`` (:data:`~torch_depth_sr.config.PRESETS`: ``'default'``, ``'fast'``,
-        ``'paper'``, ``'tv'``, ``'tv+nl'``), then ``overrides`` (:meth:`RestorerConfig.replace`). Trained models
-        come from :meth:`from_pretrained`.
+        """The named configuration ``name`` (:data:`~torch_depth_sr.config.PRESETS`: ``'default'``, ``'paper'``,
+        ``'tv'``, ``'tv+nl'``), then ``overrides`` (:meth:`RestorerConfig.replace`). The speed tiers ``'fast'``
+        and ``'best'`` (:data:`~torch_depth_sr.config.TRAINED_PRESETS`) carry trained parameters: they load the
+        shipped model they name (:meth:`from_pretrained`, ``overrides`` as :meth:`load` takes them). Other trained
+        models come from :meth:`from_pretrained`.
 
         Examples:
-            >>> DepthRestorer.from_preset("fast").config.block_matching.search_window
-            11
+            >>> DepthRestorer.from_preset("fast").config.block_matching.match_layers
+            ()
             >>> DepthRestorer.from_preset("paper").config.value_prior is None
             True
         """
+        if name in TRAINED_PRESETS:
+            return cls.from_pretrained(TRAINED_PRESETS[name], trainable=trainable, **overrides)
         return cls(preset_config(name, **overrides), trainable=trainable)
 
     def forward(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None, mask: Optional[torch.Tensor] = None,

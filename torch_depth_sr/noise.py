@@ -167,7 +167,22 @@ def _percentiles(vals: torch.Tensor) -> torch.Tensor:
     """p1 and p99 of a 1-D tensor in its own dtype (float32 would overflow at 1e200 or flush 1e-300 to 0)."""
     dt = torch.float64 if vals.dtype == torch.float64 else torch.float32
     sub = vals if vals.numel() < 16_000_000 else vals[:: max(1, vals.numel() // 1_000_000)]
-    return torch.quantile(sub.to(dt), torch.tensor([0.01, 0.99], dtype=dt, device=vals.device)).to(vals.dtype)
+    q = torch.tensor([0.01, 0.99], dtype=dt)
+    if sub.device.type != "cpu" or sub.numel() < 2 or bool(torch.isnan(sub).any()):
+        return torch.quantile(sub.to(dt), q.to(sub.device)).to(vals.dtype)
+    return _quantiles_by_selection(sub.to(dt).reshape(-1), q).to(vals.dtype)
+
+
+def _quantiles_by_selection(v: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
+    """``torch.quantile(v, q)`` (linear interpolation) bit for bit, from the two order statistics around each rank
+    found by selection (``kthvalue``, linear time) instead of a full sort: the ranks, the interpolation weights and
+    the ``lerp`` are torch.quantile's own (``ranks = q·(n−1)`` in ``v``'s dtype). ``v`` 1-D without NaN."""
+    ranks = q * (v.numel() - 1)
+    below, above = ranks.to(torch.long), ranks.ceil().to(torch.long)
+    order = {k: v.kthvalue(k + 1).values for k in sorted(set(below.tolist()) | set(above.tolist()))}
+    lo = torch.stack([order[k] for k in below.tolist()])
+    hi = torch.stack([order[k] for k in above.tolist()])
+    return lo.lerp(hi, (ranks - below).to(v.device))
 
 
 def sample_percentiles(depth: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
@@ -215,6 +230,12 @@ def implausible(depth: torch.Tensor, observed: torch.Tensor, scale: torch.Tensor
 
 
 def _grid_step(vals: torch.Tensor, default: float) -> float:
+    limit = vals.numel() // 4
+    if vals.numel() >= 4096:  # more distinct values in a prefix than the limit: more in all of them (noisy float
+        # data, which repeats no value), without sorting all of them
+        prefix = vals.reshape(-1)[: limit + 1 + limit // 8]
+        if torch.unique(prefix).numel() > limit:
+            return default
     uniq = torch.unique(vals)
     if uniq.numel() < 2 or uniq.numel() > vals.numel() // 4:
         return default

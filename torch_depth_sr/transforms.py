@@ -537,7 +537,11 @@ class RestoreDepth(Transform):
 
     Args:
         restorer: a :class:`~torch_depth_sr.DepthRestorer` (default: a new frozen one built from
-            ``config``/``overrides``, or ``DepthRestorer.from_pretrained(pretrained)``).
+            ``config``/``overrides``, or ``DepthRestorer.from_preset(preset)``, or
+            ``DepthRestorer.from_pretrained(pretrained)``).
+        preset: a named model by :meth:`DepthRestorer.from_preset <torch_depth_sr.DepthRestorer.from_preset>`: a
+            speed tier (``"fast"``, ``"default"``, ``"best"``; ``docs/speed.md``) or another named configuration
+            (``"paper"``, ...); ``overrides`` apply to it.
         pretrained: name of shipped parameters (see ``DepthRestorer.from_pretrained``).
         device: where to compute (``"cuda"`` for batched GPU use); the result goes back to the
             input's device.
@@ -553,11 +557,17 @@ class RestoreDepth(Transform):
 
     def __init__(self, restorer: Optional[DepthRestorer] = None, pretrained: Optional[str] = None,
                  device: Union[str, torch.device] = "cpu", keep_input: Optional[str] = None,
-                 with_confidence: bool = False, config: Optional[RestorerConfig] = None, **overrides: Any) -> None:
+                 with_confidence: bool = False, config: Optional[RestorerConfig] = None, *,
+                 preset: Optional[str] = None, **overrides: Any) -> None:
         from .model import DepthRestorer
 
+        if preset is not None and (restorer is not None or pretrained is not None or config is not None):
+            raise DepthSRError("RestoreDepth: preset names the model; give no restorer, pretrained or config with it "
+                               "(overrides apply to the preset).")
         if restorer is None:
-            if pretrained is not None:
+            if preset is not None:
+                restorer = DepthRestorer.from_preset(preset, **overrides)
+            elif pretrained is not None:
                 restorer = DepthRestorer.from_pretrained(pretrained)
             else:
                 restorer = DepthRestorer(config, **overrides)

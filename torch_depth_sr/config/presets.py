@@ -1,13 +1,15 @@
 """Named configurations, reached through :meth:`DepthRestorer.from_preset(name) <torch_depth_sr.DepthRestorer.from_preset>`
-(trained models through ``from_pretrained``). Each is a set of changes to the defaults; its measured accuracy and
-time are in ``docs/model-choices/`` and ``docs/speed.md``."""
+(trained models through ``from_pretrained``). Each of :data:`PRESETS` is a set of changes to the defaults; each of
+:data:`TRAINED_PRESETS` names a shipped model that ``from_preset`` loads (the speed tiers ``fast`` and ``best``:
+:data:`TIERS`). Their measured accuracy and time are in ``docs/model-choices/`` and ``docs/speed.md``."""
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from .restorer import RestorerConfig
 
-__all__ = ["PRESETS", "preset_config"]
+__all__ = ["PRESETS", "TIERS", "TRAINED_PRESETS", "preset_config"]
 
 # what the paper's model leaves out: the library's extensions of the objective and its post-steps
 _NO_EXTENSIONS = dict(value_prior=None, guided_prior=None, fidelity=None, clean_samples=None, edge_snap=None,
@@ -16,10 +18,6 @@ _NO_EXTENSIONS = dict(value_prior=None, guided_prior=None, fidelity=None, clean_
 PRESETS: dict[str, dict[str, Any]] = {
     # the defaults: what restore_depth(depth, rgb) runs
     "default": {},
-    # the defaults before k = 40 (10 matches, the value prior's weight 10 on every sample) in an 11×11 window with
-    # one re-match: about half the time at 640×480 (docs/speed.md)
-    "fast": dict(block_matching=dict(search_window=11, k=10, upsample_search_window=11, match_layers=(2,)),
-                 clean_samples=dict(value_weight=None)),
     # the paper's model as it stands (model.md): 5×5 blocks, 21×21 window, k = 10, exact re-matching, x⁰ = y with
     # its holes pulled-pushed, the singular test without the library's support rules and gate. Weights stay in
     # noise-σ units, CG keeps its fixed schedule, and guided upsampling (which the paper does not model) keeps the
@@ -34,14 +32,37 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+# Named configurations that carry trained parameters: ``DepthRestorer.from_preset(name)`` loads the shipped model
+# ``from_pretrained(TRAINED_PRESETS[name])`` (issue 27's speed tiers, docs/speed.md "Speed tiers"):
+# "fast": 3 layers trained end to end, one block-matching pass on x⁰ (7×7 window, 10 matches), 2 singular-test
+#   rounds, a 7×7 x⁰ filter, then a small trained edge refiner (8 channels, 2 layers); about a fifteenth of the
+#   default's time at 640×480;
+# "best": the best shipped denoiser (the guidance CNN's per-pixel thresholds and the edge refiner).
+TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast", "best": "denoise-refined"}
+
+# the speed tiers, fastest first: what each name is, for users choosing by time (docs/speed.md)
+TIERS = ("fast", "default", "best")
+
+
 def preset_config(name: str, **overrides: Any) -> RestorerConfig:
-    """The configuration named ``name`` (:data:`PRESETS`), then ``overrides`` (as :meth:`RestorerConfig.replace`).
+    """The configuration named ``name`` (:data:`PRESETS`, or the ``config.json`` of the shipped model a name of
+    :data:`TRAINED_PRESETS` loads), then ``overrides`` (as :meth:`RestorerConfig.replace`). The trained parameters
+    of those come only with :meth:`DepthRestorer.from_preset <torch_depth_sr.DepthRestorer.from_preset>`.
 
     Examples:
-        >>> preset_config("fast").block_matching.search_window
-        11
+        >>> preset_config("paper").block_matching.block_size
+        5
+        >>> preset_config("fast").num_layers
+        3
     """
+    if name in TRAINED_PRESETS:
+        from .restorer import load_config_file
+
+        return load_config_file(_PRETRAINED / TRAINED_PRESETS[name] / "config.json").replace(**overrides)
     if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; allowed are {sorted(PRESETS)} (trained models: "
-                         "DepthRestorer.from_pretrained).")
+        raise ValueError(f"unknown preset {name!r}; allowed are {sorted([*PRESETS, *TRAINED_PRESETS])} (other "
+                         "trained models: DepthRestorer.from_pretrained).")
     return RestorerConfig().replace(**PRESETS[name]).replace(**overrides)
+
+
+_PRETRAINED = Path(__file__).resolve().parents[1] / "pretrained"

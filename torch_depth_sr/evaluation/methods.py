@@ -24,6 +24,7 @@ __all__ = [
     "RGF_PARAMS",
     "SHIPPED",
     "TAKES_PRETRAINED",
+    "TIER_METHODS",
     "run_method",
 ]
 
@@ -60,16 +61,19 @@ SHIPPED = {"trained": "denoise", "trained-guided": "denoise-guided", "trained-re
            "trained-x4": "upsample-x4", "trained-upsample": "upsample", "trained-upsample-area": "upsample-area"}
 # those of them that load a saved candidate instead when ``pretrained`` is given
 TAKES_PRETRAINED = ("trained", "trained-refined", "trained-x4", "trained-upsample", "trained-upsample-area")
-_MODEL_METHODS = ("tv", "tv+nl", "full", "full-fast", "paper-model", *SHIPPED)
+_MODEL_METHODS = ("tv", "tv+nl", "full", "fast", "best", "full-fast", "paper-model", *SHIPPED)
 
 
-# the model methods' named configurations (``DepthRestorer.from_preset``)
-PRESET_OF = {"tv": "tv", "tv+nl": "tv+nl", "full": "default", "full-fast": "fast", "paper-model": "paper"}
+# the model methods' named configurations (``DepthRestorer.from_preset``); the speed tiers (issue 27) are ``fast``,
+# ``full`` (the default) and ``best``; ``full-fast`` is the former name of ``fast``
+PRESET_OF = {"tv": "tv", "tv+nl": "tv+nl", "full": "default", "fast": "fast", "best": "best", "full-fast": "fast",
+             "paper-model": "paper"}
+TIER_METHODS = {"fast": "fast", "default": "full", "best": "best"}  # tier name -> bench method
 
 
 @lru_cache(maxsize=None)
 def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[str] = None):
-    from ..config import apply_overrides, preset_config
+    from ..config import TRAINED_PRESETS, apply_overrides, preset_config
     from ..model import DepthRestorer
 
     if pretrained is not None:  # a candidate before it ships (run_method passes it to TAKES_PRETRAINED only)
@@ -77,7 +81,16 @@ def _model(name: str, device: str, overrides: str = "{}", pretrained: Optional[s
     if name in SHIPPED:
         return DepthRestorer.from_pretrained(SHIPPED[name]).to(device)
     # "paper-model": the paper's model without the library's extensions (preset "paper")
-    return DepthRestorer(apply_overrides(preset_config(PRESET_OF[name]), json.loads(overrides))).to(device)
+    preset = PRESET_OF[name]
+    if preset in TRAINED_PRESETS:  # a speed tier that carries trained parameters
+        model = DepthRestorer.from_preset(preset)
+        changes = json.loads(overrides)
+        if changes:
+            trained = model.state_dict()
+            model = DepthRestorer(apply_overrides(model.config, changes))
+            model.load_state_dict(trained)
+        return model.to(device)
+    return DepthRestorer(apply_overrides(preset_config(preset), json.loads(overrides))).to(device)
 
 
 def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[dict] = None,
@@ -85,7 +98,7 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
     """Run ``name`` on a sample dict (``depth (1,h,w)``, ``rgb (3,H,W)``, optional ``factor``).
 
     ``config``: :class:`~torch_depth_sr.RestorerConfig` overrides for the model methods (``tv``, ``tv+nl``,
-    ``full``, ``full-fast``, ``paper-model``: :data:`PRESET_OF`), applied to the method's preset by
+    ``full``, ``fast``, ``best``, ``full-fast``, ``paper-model``: :data:`PRESET_OF`), applied to the method's preset by
     :func:`~torch_depth_sr.config.apply_overrides`, e.g. ``{"block_matching": {"block_size": 5}}`` (or the
     version-1 ``{"block_size": 5}``); the shipped ``trained`` parameters and the baselines ignore it.
     ``track``: the benchmark track; ``jbf`` and ``rgf`` have settings fitted per track (``paper`` when not given).
@@ -115,6 +128,11 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
             if factor > 1:
                 raise ValueError("rgf is a denoising baseline; it does not upsample.")
             return rolling_guidance_filter(y, mask, **RGF_PARAMS.get(track or "paper", RGF_PARAMS["paper"]))
+        if name == "kornia-jbf9":  # kornia's 9x9 joint bilateral blur as users call it (bench --track speed's
+            # reference), on the depth with its holes pulled-pushed first
+            import kornia
+
+            return kornia.filters.joint_bilateral_blur(fill_holes(y, mask), rgb, (9, 9), 0.1, (3.0, 3.0))
         if name == "dictionary":
             from ..baselines import dictionary_denoise
 
@@ -122,6 +140,6 @@ def run_method(name: str, sample: dict, device: str = "cpu", config: Optional[di
         if name in _MODEL_METHODS:
             return _model(name, device, json.dumps(config or {}, sort_keys=True),
                           pretrained if name in TAKES_PRETRAINED else None)(y, rgb)
-    extra = [m for m in _MODEL_METHODS if m not in DENOISE_METHODS + UPSAMPLE_METHODS]
+    extra = [m for m in (*_MODEL_METHODS, "kornia-jbf9") if m not in DENOISE_METHODS + UPSAMPLE_METHODS]
     raise ValueError(f"unknown method {name!r}; allowed are {sorted(set(DENOISE_METHODS + UPSAMPLE_METHODS))} "
                      f"and {extra}.")

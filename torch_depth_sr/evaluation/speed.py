@@ -3,9 +3,10 @@
 Times, side by side in one run and on the same synthetic inputs
 (:func:`~torch_depth_sr.datasets.synthetic.make_scene` + Gaussian noise σ = 5 + holes):
 
-* ``full`` — :class:`~torch_depth_sr.DepthRestorer` with its default config, with the per-stage split
-  the model reports in ``info["seconds"]`` (block matching, singular detection, CG solves, the
-  rest = total − those) and the CG iterations of every layer;
+* ``full``, ``fast``, ``best`` — the speed tiers (``DepthRestorer.from_preset("default" | "fast" | "best")``;
+  ``full-fast`` is the former name of ``fast``), with the per-stage split the model reports in
+  ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
+  refiner, the rest = total − those) and the CG iterations of every layer;
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
 * ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
   reference every ratio is taken against (``ratio = method time / kornia-jbf9 time``, same size and
@@ -55,18 +56,23 @@ __all__ = [
     "run_speed",
 ]
 
-METHODS = ("full", "full-fast", "stream", "stream-fast", "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary",
-           "kornia-jbf9", "dataloader")
+METHODS = ("full", "fast", "best", "full-fast", "stream", "stream-fast", "bm-exact", "bm-refine", "x0-filter", "jbf",
+           "dictionary", "kornia-jbf9", "dataloader")
+# the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best
+MODEL_PRESETS = {"full": "default", "fast": "fast", "best": "best", "full-fast": "fast"}
 # "stream", "stream-fast": a step of a StreamRestorer of the default / fast model on the inputs' static scene with new
 # noise (σ = 5) and the same holes every call (the warm-up call is the stream's first, cold, frame; the timed calls
 # are stream steps; the rmse is the last step's).
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
-# "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240) once and reports its frames/s.
+# "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240, the fast tier) once and reports its
+# frames/s.
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
-DEFAULT_SKIP = ("full@1088x1376x8", "full-fast@1088x1376x8", "dictionary@1088x1376x8")
+DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "best@1088x1376x8", "full-fast@1088x1376x8",
+                "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "nonlocal", "cg")
+POST_STAGES = ("snap", "refine")  # the edge steps and the edge refiner (row["post_stages"])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -101,10 +107,10 @@ def _make_runner(method: str, device: str):
     """A function ``(depth, rgb) -> (out, details or None)`` for ``method``."""
     from .methods import DICTIONARY_PARAMS, JBF_PARAMS
 
-    if method in ("full", "full-fast"):
+    if method in MODEL_PRESETS:
         from ..model import DepthRestorer
 
-        model = DepthRestorer.from_preset("default" if method == "full" else "fast").to(device)
+        model = DepthRestorer.from_preset(MODEL_PRESETS[method]).to(device)
 
         def run(y, rgb):
             r = model.restore_with_details(y, rgb, timings=True)
@@ -180,16 +186,18 @@ def _stage_runner(method: str):
     return run
 
 
-def measure_dataloader(workers: int = 2, frames: int = 16, size: tuple[int, int] = (240, 320)) -> dict:
-    """Frames per second of ``examples/restore_in_dataloader.py`` (start-up included), or an error row."""
+def measure_dataloader(workers: int = 2, frames: int = 16, size: tuple[int, int] = (240, 320),
+                       tier: str = "fast") -> dict:
+    """Frames per second of ``examples/restore_in_dataloader.py --tier TIER`` (start-up included), or an error
+    row."""
     script = Path(__file__).resolve().parents[2] / "examples" / "restore_in_dataloader.py"
     row = {"method": "dataloader", "height": size[0], "width": size[1], "batch": 1, "workers": workers,
-           "frames": frames}
+           "frames": frames, "tier": tier}
     if not script.exists():
         return {**row, "error": f"{script} not found (the examples ship with the repository, not the wheel)"}
     t0 = time.perf_counter()
     p = subprocess.run([sys.executable, str(script), "--workers", str(workers), "--frames", str(frames), "--size",
-                        str(size[0]), str(size[1])], capture_output=True, text=True)
+                        str(size[0]), str(size[1]), "--tier", tier], capture_output=True, text=True)
     wall = time.perf_counter() - t0
     for line in p.stdout.splitlines():
         if "frames/s" in line:
@@ -267,8 +275,9 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
         infos = infos or [info]
         med = sorted(infos, key=lambda d: d["seconds"]["total"])[len(infos) // 2]
         sec = dict(med["seconds"])
-        sec["rest"] = sec["total"] - sum(sec.get(k, 0.0) for k in STAGES)
+        sec["rest"] = sec["total"] - sum(sec.get(k, 0.0) for k in (*STAGES, *POST_STAGES))
         row["stages"] = {k: sec.get(k, 0.0) for k in (*STAGES, "rest", "total")}
+        row["post_stages"] = {k: sec.get(k, 0.0) for k in POST_STAGES}
         row["cg_iterations"] = list(med["cg_iterations"])
         row["rmse"] = float((out.float().cpu() - gt).pow(2).mean().sqrt())
     row["threads"] = torch.get_num_threads()
@@ -332,7 +341,7 @@ def run_speed(args: argparse.Namespace) -> int:
         methods.remove("dataloader")
         row = measure_dataloader()
         results.append(row)
-        print("  dataloader (2 workers, 320x240): " + (f"{row['fps']:.2f} frames/s" if "fps" in row
+        print(f"  dataloader (2 workers, 320x240, tier {row['tier']}): " + (f"{row['fps']:.2f} frames/s" if "fps" in row
                                                        else "ERROR " + row["error"]), flush=True)
     for h, w in sizes:
         for b in batches:
@@ -355,7 +364,8 @@ def run_speed(args: argparse.Namespace) -> int:
         if "seconds" not in r:
             continue
         if r["method"] == "dataloader":
-            table.append({"method": f"dataloader, {r['workers']} workers (frames/s {r['fps']:.2f})",
+            table.append({"method": f"dataloader, {r.get('tier', 'default')}, {r['workers']} workers "
+                                    f"(frames/s {r['fps']:.2f})",
                           "size": f"{r['width']}x{r['height']}", "batch": 1, "seconds": r["seconds"],
                           "ms/frame": 1000.0 * r["seconds"]})
             continue
@@ -368,11 +378,12 @@ def run_speed(args: argparse.Namespace) -> int:
         st = r.get("stages")
         if st:
             t.update({"bm": st["block_matching"], "singular": st["singular"], "nonlocal": st["nonlocal"], "cg": st["cg"],
-                      "rest": st["rest"],
+                      "edges": r.get("post_stages", {}).get("snap", 0.0),
+                      "refiner": r.get("post_stages", {}).get("refine", 0.0), "rest": st["rest"],
                       "cg it/layer": "/".join(str(i) for i in r["cg_iterations"])})
         table.append(t)
     cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "peak MB", "bm", "singular", "nonlocal", "cg",
-            "rest",
+            "edges", "refiner", "rest",
             "cg it/layer", "load"]
     meta = _metadata(device)
     meta.update(track="speed", threads=threads or torch.get_num_threads(), cpu_count=os.cpu_count(),

@@ -156,7 +156,7 @@ def conjugate_gradient(
         p = z
         rz = _bdot(r, z)  # (B,)
         first = True
-        for _ in range(max_iter):
+        for it in range(max_iter):
             Ap = _apply(apply_A, p, "apply_A") if first else apply_A(p)
             first = False
             pAp = _bdot(p, Ap)  # (B,)
@@ -171,8 +171,8 @@ def conjugate_gradient(
             iterations = iterations + active.long()
             done = done | (rel <= tol)
             history.append(rel.detach().max())
-            if early_exit and bool(done.all()):
-                break
+            if (early_exit and bool(done.all())) or it == max_iter - 1:
+                break  # the last iteration: the next direction would never be used (x is final)
             z = r if precond is None else precond(r)
             rz_new = _bdot(r, z)
             keep = ~done & (rz != 0)

@@ -1,0 +1,182 @@
+"""Issue 27: the speed tiers by name (``fast``, ``default``, ``best``) through every entry point, and the kernel
+changes of the speed work against their references (each must keep the outputs bit for bit)."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+from torch_depth_sr import DepthRestorer
+from torch_depth_sr.config import PRESETS, TIERS, TRAINED_PRESETS, preset_config
+
+
+@pytest.fixture(scope="module")
+def sample():
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(40, 48, seed=3)
+    g = torch.Generator().manual_seed(27)
+    y = s["gt"] + 3.0 * torch.randn(s["gt"].shape, generator=g)
+    y[..., 10:14, 20:26] = 0  # a hole
+    return {"depth": y.clamp_min(0), "rgb": s["rgb"], "gt": s["gt"]}
+
+
+# ---- the tiers ------------------------------------------------------------------------------------------------
+def test_every_tier_is_a_name_of_from_preset():
+    assert TIERS == ("fast", "default", "best")
+    assert set(TIERS) <= set(PRESETS) | set(TRAINED_PRESETS)
+    assert DepthRestorer.from_preset("default").config == DepthRestorer().config
+    best, refined = DepthRestorer.from_preset("best"), DepthRestorer.from_pretrained("denoise-refined")
+    assert best.config == refined.config
+    assert all(torch.equal(a, b) for a, b in zip(best.state_dict().values(), refined.state_dict().values()))
+    fast = DepthRestorer.from_preset("fast")
+    assert fast.config == preset_config("fast") == DepthRestorer.from_pretrained(TRAINED_PRESETS["fast"]).config
+    assert fast.config.block_matching.match_layers == ()  # one block-matching pass, on x⁰
+    assert fast.config.num_layers < DepthRestorer().config.num_layers
+
+
+def test_a_trained_tier_takes_overrides_and_trainable():
+    m = DepthRestorer.from_preset("fast", edge_snap=None, trainable=True)
+    assert m.config.edge_snap is None
+    assert any(p.requires_grad for p in m.parameters())
+    with pytest.raises(ValueError, match="allowed are"):
+        preset_config("fastest")
+
+
+def test_the_tiers_are_bench_methods(sample):
+    from torch_depth_sr.evaluation.methods import TIER_METHODS, run_method
+
+    assert TIER_METHODS == {"fast": "fast", "default": "full", "best": "best"}
+    s = {"depth": sample["depth"], "rgb": sample["rgb"]}
+    with torch.no_grad():
+        want = DepthRestorer.from_preset("fast")(sample["depth"][None], sample["rgb"][None])
+    got = run_method("fast", s)
+    assert torch.equal(got, want)
+    assert torch.equal(run_method("full-fast", s), want)  # the former name of the fast tier
+    changed = run_method("fast", s, config={"edge_snap": None, "edge_refit": None})  # overrides keep the training
+    assert changed.shape == want.shape and torch.isfinite(changed).all()
+
+
+def test_the_speed_track_runs_the_tiers():
+    from torch_depth_sr.evaluation.speed import measure
+
+    row = measure("fast", 24, 32, 1, repeats=1)
+    assert row["method"] == "fast" and row["stages"]["total"] > 0 and len(row["cg_iterations"]) == preset_config("fast").num_layers
+    assert set(row["post_stages"]) == {"snap", "refine"}
+
+
+def test_restore_depth_transform_takes_the_tier_by_name(sample):
+    from torch_depth_sr import restore_depth
+    from torch_depth_sr.errors import DepthSRError
+    from torch_depth_sr.transforms import RestoreDepth
+
+    out = RestoreDepth(preset="fast")({"depth": sample["depth"].clone(), "rgb": sample["rgb"]})["depth"]
+    with torch.no_grad():
+        want = restore_depth(sample["depth"], sample["rgb"], model=DepthRestorer.from_preset("fast"))
+    assert torch.equal(out, want)
+    assert RestoreDepth(preset="default", num_layers=2).restorer.config.num_layers == 2
+    with pytest.raises(DepthSRError, match="preset"):
+        RestoreDepth(preset="fast", pretrained="denoise")
+
+
+# ---- the kernels: bit for bit against their references --------------------------------------------------------
+def test_edge_steps_skip_the_samples_they_may_not_change():
+    """snap_to_sides and refit_to_measurements compute only the active samples on the CPU; the result is that of
+    the computation over every sample, masked (the reference: ``active=None`` per sample, or x itself)."""
+    from torch_depth_sr.edge_snap import refit_to_measurements, snap_to_sides
+
+    g = torch.Generator().manual_seed(0)
+    x = (torch.rand(3, 1, 20, 24, generator=g) * 4).round() * 3 + torch.rand(3, 1, 20, 24, generator=g)
+    rgb = torch.rand(3, 3, 20, 24, generator=g)
+    y, obs = x + 0.1 * torch.randn(x.shape, generator=g), (torch.rand(x.shape, generator=g) > 0.2).float()
+    for active in ([True, False, True], [False, False, False], [True, True, True]):
+        a = torch.tensor(active).view(3, 1, 1, 1)
+        for rounds in (1, 2):
+            got = snap_to_sides(x, rgb, rounds=rounds, radius=2, active=a)
+            want = torch.stack([snap_to_sides(x[i:i + 1], rgb[i:i + 1], rounds=rounds, radius=2)[0] if active[i]
+                                else x[i] for i in range(3)])
+            assert torch.equal(got, want)
+        got = refit_to_measurements(x, y, obs, rgb, radius=3, band=1.0, edge=2.0, active=a)
+        want = torch.stack([refit_to_measurements(x[i:i + 1], y[i:i + 1], obs[i:i + 1], rgb[i:i + 1], radius=3,
+                                                  band=1.0, edge=2.0)[0] if active[i] else x[i] for i in range(3)])
+        assert torch.equal(got, want)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64, torch.float16])
+def test_percentiles_by_selection_are_torch_quantile(dtype):
+    from torch_depth_sr.noise import _percentiles
+
+    g = torch.Generator().manual_seed(1)
+    for n in (2, 3, 101, 5000, 20011):
+        for scale in (1e-3, 1.0, 1e4):
+            v = (torch.randn(n, generator=g, dtype=torch.float64) * scale).to(dtype)
+            for vals in (v, v.round(), v.abs()):
+                ref_dt = torch.float64 if vals.dtype == torch.float64 else torch.float32
+                want = torch.quantile(vals.to(ref_dt), torch.tensor([0.01, 0.99], dtype=ref_dt)).to(vals.dtype)
+                assert torch.equal(_percentiles(vals), want)
+
+
+def test_grid_step_shortcut_decides_as_the_full_count():
+    from torch_depth_sr.noise import _grid_step
+
+    def reference(vals, default):
+        uniq = torch.unique(vals)
+        if uniq.numel() < 2 or uniq.numel() > vals.numel() // 4:
+            return default
+        step = float((uniq[1:] - uniq[:-1]).min())
+        ratio = uniq / step
+        if float((ratio - ratio.round()).abs().max()) < 1e-4 and float(ratio.abs().max()) < 2**40:
+            return step
+        return default
+
+    g = torch.Generator().manual_seed(2)
+    for n in (100, 4096, 5000, 40000):
+        noisy = torch.randn(n, generator=g, dtype=torch.float64) * 30 + 100
+        for vals in (noisy, noisy.round(), (noisy / 2).round() * 2, noisy.round() + 0.5 * (noisy > 100),
+                     torch.cat([noisy[: n // 2].round(), noisy[n // 2:]])):
+            assert _grid_step(vals, 0.0) == reference(vals, 0.0)
+
+
+def test_cg_without_the_unused_last_direction_is_the_textbook_loop():
+    """conjugate_gradient stops after the last update of x instead of forming a direction nobody reads: x, the
+    iteration counts and the residuals are those of the loop of before (copied here as the reference)."""
+    from torch_depth_sr.operators import laplacian
+    from torch_depth_sr.solvers.cg import conjugate_gradient
+    from torch_depth_sr.solvers.dct import NeumannPreconditioner
+
+    def reference(apply_a, b, x, precond, tol, max_iter):
+        dot = lambda u, v: (u * v).flatten(1).sum(1)  # noqa: E731
+        view = lambda t: t.view(-1, *([1] * (b.ndim - 1)))  # noqa: E731
+        bn = torch.linalg.vector_norm(b.flatten(1), dim=1)
+        bn = torch.where(bn > 0, bn, torch.ones_like(bn))
+        r = b - apply_a(x)
+        rel = torch.linalg.vector_norm(r.flatten(1), dim=1) / bn
+        done, its = rel <= tol, torch.zeros(b.shape[0], dtype=torch.long)
+        z = precond(r)
+        p, rz = z, dot(r, z)
+        for _ in range(max_iter):
+            ap = apply_a(p)
+            pap = dot(p, ap)
+            active = ~done & (pap > 0)
+            done = done | ~active
+            alpha = torch.where(active, rz / torch.where(active, pap, torch.ones_like(pap)), torch.zeros_like(pap))
+            x = x + view(alpha) * p
+            r = r - view(alpha) * ap
+            rel = torch.where(active, torch.linalg.vector_norm(r.flatten(1), dim=1) / bn, rel)
+            its = its + active.long()
+            done = done | (rel <= tol)
+            z = precond(r)
+            rz_new = dot(r, z)
+            keep = ~done & (rz != 0)
+            beta = torch.where(keep, rz_new / torch.where(keep, rz, torch.ones_like(rz)), torch.zeros_like(rz))
+            p, rz = z + view(beta) * p, rz_new
+        return x, its, rel
+
+    g = torch.Generator().manual_seed(3)
+    q = (torch.rand(2, 1, 24, 70, generator=g) > 0.3).float()
+    b, x0 = torch.randn(2, 1, 24, 70, generator=g), torch.randn(2, 1, 24, 70, generator=g)
+    apply_a = lambda v: q * v + 2.0 * laplacian(v)  # noqa: E731
+    precond = NeumannPreconditioner(q.flatten(1).mean(1), torch.tensor(2.0))
+    for max_iter in (1, 2, 5):
+        res = conjugate_gradient(apply_a, b, x0=x0, precond=precond, tol=1e-30, max_iter=max_iter, early_exit=False)
+        x, its, rel = reference(apply_a, b, x0, precond, 1e-30, max_iter)
+        assert torch.equal(res.x, x) and torch.equal(res.iterations, its) and torch.equal(res.residual, rel)
