@@ -32,7 +32,7 @@ GROUPS = tuple(name for name, hint in typing.get_type_hints(RestorerConfig).item
                if name in {f.name for f in dataclasses.fields(RestorerConfig)} and _group_type(hint))
 PRETRAINED = sorted((Path(torch_depth_sr.__file__).parent / "pretrained").glob("*/config.json"))
 # every group on, so that each is compared field by field
-ALL_ON = RestorerConfig().replace(guidance={}, refiner={})
+ALL_ON = RestorerConfig().replace(guidance={}, refiner={}, stream={})
 
 
 def _changed(name: str, v):

@@ -15,6 +15,7 @@ from .recordings import discover_recordings, restore_dataset
 from .shrinkage import group_soft_threshold, soft_threshold
 from .singular import detect_singular
 from .solvers.cg import conjugate_gradient
+from .stream import StreamRestorer
 from .transforms import RestoreDepth
 
 __version__ = "0.1.0"
@@ -32,6 +33,7 @@ __all__ = [
     "RestoreDepth",
     "RestorerConfig",
     "ShapeError",
+    "StreamRestorer",
     "__version__",
     "bad_pixel_rate",
     "block_match",

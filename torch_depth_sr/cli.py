@@ -188,19 +188,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     b = sub.add_parser("bench", help="benchmarks on the shared Middlebury data (see README)")
     b.add_argument("--track", required=True,
-                   choices=["paper", "sensor", "upsample-a", "upsample-b", "real", "speed", "gdsr"])
+                   choices=["paper", "sensor", "upsample-a", "upsample-b", "real", "speed", "gdsr", "stream"])
     b.add_argument("--data", default=None, help="data root (default: $TORCH_DEPTH_SR_DATA or ../shared/data)")
     b.add_argument("--methods", nargs="*", default=None)
     b.add_argument("--scenes", nargs="*", default=None,
                    help="scene names (track gdsr: file keys, e.g. 02 30 for Middlebury, 1000 for NYU, RGB-D-D timestamps)")
     b.add_argument("--sigma", type=float, default=None, help="noise std for track paper (grey levels)")
     b.add_argument("--sets", nargs="+", default=None,
-                   help="track gdsr: Middlebury Lu NYUDepthv2_Test RGBDD RGBDD_Test_Realscene (default: Middlebury Lu)")
+                   help="track gdsr: Middlebury Lu NYUDepthv2_Test RGBDD RGBDD_Test_Realscene (default: Middlebury "
+                        "Lu); track stream: synthetic real (default both)")
     b.add_argument("--scales", nargs="+", type=_whole_number(2), default=None, help="track gdsr: default 4 8 16")
     b.add_argument("--noise", nargs="+", type=float, default=None,
                    help="track gdsr: noise std on a 0-255 scale of each image's range (default 0)")
     b.add_argument("--max-images", type=_positive_int, default=None,
                    help="track gdsr: at most this many images per set, evenly spaced (a quick subset of RGBDD)")
+    b.add_argument("--model", default=None,
+                   help="track stream: the model of the methods frame and stream, a preset or a shipped name "
+                        "(default fast)")
+    b.add_argument("--frames", type=_positive_int, default=None, help="track stream: frames per synthetic sequence "
+                   "(default 30)")
+    b.add_argument("--size", default=None, help="track stream: HxW of the synthetic sequences (default 120x160)")
+    b.add_argument("--real-frames", type=_positive_int, default=None,
+                   help="track stream: first frames of each real sequence (default 30)")
+    b.add_argument("--real-stride", type=_positive_int, default=None,
+                   help="track stream: every n-th pixel of the real frames (default 2)")
     b.add_argument("--json", default=None)
     b.add_argument("--figures", default=None)
     b.add_argument("--save-inputs", default=None)

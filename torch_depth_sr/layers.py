@@ -30,7 +30,7 @@ from .operators import grad
 from .stages import LinearSolver
 from .state import RestorationState
 from .terms import (GuidedPriorTerm, LayerStep, MatchReader, NonlocalTerm, OutlierTerm, Rematch, SingularTest, System,
-                    TVTerm, ValuePriorTerm)
+                    TemporalPriorTerm, TVTerm, ValuePriorTerm)
 
 __all__ = ["UnrolledLayer", "match_steps", "terms_for"]
 
@@ -41,8 +41,9 @@ def _inv_softplus(v: float) -> float:
 
 
 def terms_for(config: RestorerConfig, task: str) -> nn.ModuleList:
-    """The terms a layer sums for ``task``, in the order of the sums (the value prior and the guided prior compare
-    the estimate with the observation pixel by pixel: denoising only, the value prior only when there are matches)."""
+    """The terms a layer sums for ``task``, in the order of the sums (the value prior, the guided prior and a stream's
+    temporal prior compare the estimate with the observation pixel by pixel: denoising only, the value prior only
+    when there are matches)."""
     denoise = task == "denoise"
     clean = _clean_samples(config, task)
     terms: list = [TVTerm(config.weights.isotropic)]
@@ -54,6 +55,8 @@ def terms_for(config: RestorerConfig, task: str) -> nn.ModuleList:
         terms.append(ValuePriorTerm())
     if config.uses("outliers"):
         terms.append(OutlierTerm())
+    if denoise and config.stream is not None:
+        terms.append(TemporalPriorTerm(config.stream))
     return nn.ModuleList(terms)
 
 

@@ -30,7 +30,7 @@ from ._inputs import map_layout, parse_depth, parse_rgb, restore_layout
 from .config import TRAINED_PRESETS, RestorerConfig, load_config_file, preset_config
 from .errors import DepthSRError, DTypeError, ModelFileError, ShapeError
 from .guidance import GuidanceNet, NoGuidance
-from .initial import initial_stages
+from .initial import InitialEstimate, initial_stages
 from .layers import UnrolledLayer
 from .observation import Observation, observe
 from .operators import degradation_operator
@@ -198,22 +198,26 @@ class DepthRestorer(nn.Module):
         return self._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=timed, integer_input=False)
 
     def _run(self, y: torch.Tensor, observed: torch.Tensor, rgb: Any, noise_sigma: NoiseSigma,
-             scale_factor: Optional[int], fill: str, timed: bool, integer_input: bool) -> "RestorationResult":
+             scale_factor: Optional[int], fill: str, timed: bool, integer_input: bool,
+             stream: Any = None) -> "RestorationResult":
         """The algorithm on parsed input: ``y``, ``observed`` (B,1,H,W) in the compute dtype (0 at missing).
 
         Returns the :class:`RestorationResult` on the model's device, depth in the compute dtype (NaN where
         ``fill="trusted"`` leaves a hole missing). ``integer_input``: the values were integers (uint16 millimetres,
-        say), so their grid step is at least 1.
+        say), so their grid step is at least 1. ``stream``: the hooks of a
+        :class:`~torch_depth_sr.stream.StreamRestorer` (the previous frame into the observation and the initial
+        stage, this frame kept for the next); None = a frame on its own.
         """
+        stream = _NO_STREAM if stream is None else stream
         dev = self.block_matcher.log_temperature.device  # compute where the model lives; callers move the result back
         y, observed = y.to(dev), observed.to(dev)
         guide = None if rgb is None else parse_rgb(rgb, y.shape[0], y.device, y.dtype)
         K = degradation_operator(self.config.degradation, self._factor(y, guide, scale_factor))
-        obs = observe(y, observed, guide, K, noise_sigma, integer_input, self.block_matcher, timed)
+        obs = stream.observe(observe(y, observed, guide, K, noise_sigma, integer_input, self.block_matcher, timed))
         grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
         t0 = _clock(timed, y.device)
         with torch.set_grad_enabled(grad_needed):
-            initial = self.init[obs.task](obs)
+            initial = stream.initial(self.init[obs.task], obs)
             obs = replace(obs, prior=initial.prior, supported=initial.supported,
                           guidance=self._guidance(guide, initial.state.x))
             state = initial.state
@@ -225,6 +229,7 @@ class DepthRestorer(nn.Module):
         if timed:
             obs.log.timings["total"] = _clock(timed, x.device) - t0
         x = obs.denormalise(x)
+        stream.keep(x, state, obs, initial)
         if fill == "trusted":
             x = _leave_unconfident_missing(x, initial.fill_confident, obs)
         info = {"noise_sigma": obs.sigma.tolist(), "scale": obs.scale.tolist(), "offset": obs.offset.tolist(),
@@ -312,6 +317,21 @@ class DepthRestorer(nn.Module):
                              f"(folders of {root} holding config.json and state_dict.pt).")
         return cls.load(root / name, trainable=trainable, map_location=map_location, **overrides)
 
+
+class _NoStream:
+    """The stream hooks of :meth:`DepthRestorer._run` for a frame on its own: they change nothing."""
+
+    def observe(self, obs: Observation) -> Observation:
+        return obs
+
+    def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
+        return init(obs)
+
+    def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
+        pass
+
+
+_NO_STREAM = _NoStream()
 
 FILL_MODES = ("all", "trusted")
 

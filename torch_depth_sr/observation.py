@@ -44,6 +44,7 @@ class Observation:
     prior: Optional[torch.Tensor] = None  # (B,1,H,W) guided estimate untrusted pixels are pulled to (GuidedPrior)
     supported: Optional[torch.Tensor] = None  # (B,1,h,w) bool: pixels the singular test always trusts
     guidance: Any = None  # the guidance network with this forward's colour features, or NoGuidance
+    temporal: Any = None  # a stream's previous frame (stream.TemporalPrior: target, weight), None = none
 
     @property
     def grid_step(self) -> torch.Tensor:

@@ -23,7 +23,7 @@ import torch
 from torch import nn
 
 from .block_matching import BlockMatches
-from .config import CleanSamples, GuidedPrior, SingularConfig, ValuePrior
+from .config import CleanSamples, GuidedPrior, SingularConfig, StreamConfig, ValuePrior
 from .nonlocal_prior import nonlocal_terms
 from .observation import Observation
 from .operators import grad_adjoint
@@ -32,7 +32,7 @@ from .stages import SingularDetector
 from .state import RestorationState, stage
 
 __all__ = ["GuidedPriorTerm", "LayerStep", "MatchReader", "NonlocalTerm", "OutlierTerm", "Rematch", "SingularTest",
-           "System", "TVTerm", "Term", "ValuePriorTerm"]
+           "System", "TVTerm", "TemporalPriorTerm", "Term", "ValuePriorTerm"]
 
 
 @dataclass
@@ -161,6 +161,26 @@ class GuidedPriorTerm(Term):
 
     def extra_repr(self) -> str:
         return f"weight={self.settings.weight:g}, on_singular={self.settings.on_singular}"
+
+
+class TemporalPriorTerm(Term):
+    """½‖W^½ (x − x_prev)‖²: a stream's previous estimate ``obs.temporal.target`` pulls x with the per-pixel weight
+    ``obs.temporal.weight`` (the settings' weight times the evidence of static pixels, 0 where the scene changed;
+    :mod:`torch_depth_sr.stream`). Denoising; nothing without a previous frame (``obs.temporal`` None), so the first
+    frame of a stream is the per-frame model's."""
+
+    def __init__(self, settings: StreamConfig):
+        super().__init__()
+        self.settings = settings
+
+    def system(self, step: LayerStep, obs: Observation, out: System) -> None:
+        prior = obs.temporal
+        if prior is None:
+            return
+        out.add(prior.weight * prior.target, diag=prior.weight)
+
+    def extra_repr(self) -> str:
+        return f"weight={self.settings.weight:g}, max_frames={self.settings.max_frames:g}"
 
 
 class ValuePriorTerm(Term):

@@ -17,7 +17,7 @@ from .domains import boolean, choice, int_tuple, integer, non_negative, optional
 __all__ = [
     "BlockMatchingConfig", "CleanSamples", "EdgeRefit", "EdgeSnap", "FidelityBand", "Group", "Guidance",
     "GuidedPrior", "InitConfig", "JBUConfig", "LayerMultipliers", "LayerWeights", "OutputHold", "Refiner",
-    "SidedFill", "SingularConfig", "SolverConfig", "UpsamplingConfig", "ValuePrior",
+    "SidedFill", "SingularConfig", "SolverConfig", "StreamConfig", "UpsamplingConfig", "ValuePrior",
 ]
 
 
@@ -381,3 +381,45 @@ class Refiner(Group):
     _NAME: ClassVar[str] = "refiner"
     _CHECKS: ClassVar[dict] = {"channels": integer(1), "layers": integer(0),
                                "task": choice("upsample", "denoise")}
+
+
+@dataclass(frozen=True)
+class StreamConfig(Group):
+    """The state a :class:`~torch_depth_sr.stream.StreamRestorer` carries from frame to frame
+    (:mod:`torch_depth_sr.stream`; ``None``, the default: every frame on its own). Distances are in local noise
+    levels (the spread of the measurements about the estimate), colour in [0, 1], sizes in pixels.
+
+    The change test (:func:`~torch_depth_sr.stream.change_test`) calls a pixel *changed* when, in the ``window``
+    around it, the mean colour change exceeds ``color_test`` (the frame's median change removed), most measurements
+    lie farther than ``depth_test`` from the previous estimate; changed pixels are dilated by ``dilate``. When the
+    colour image as a whole shifted (its change falls below ``camera_test`` times the unshifted change; None = never),
+    the camera moved and every pixel is changed. In a static window a measurement that matches no
+    previous value near it by ``outlier_test`` is an outlier in time, dropped where the past was measured (None =
+    never), and one that left the mean of its run by as much starts a new mean.
+
+    On a static pixel the model sees the mean of the run's measurements (``y``), and the layers pull x to the
+    previous estimate with ``weight`` times the pixel's age (:class:`~torch_depth_sr.terms.TemporalPriorTerm`); the
+    age counts the frames of the static run, at most ``max_frames`` (``unmeasured_frames`` on a hole the past did
+    not measure: its fill follows the frame's own). The evidence counts the trusted measurements of the run and
+    decays by ``hole_decay`` per frame without one; a hole with evidence of at least ``fill_evidence`` is filled
+    from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
+    parts keep the previous frame's matches."""
+
+    weight: float = 1.0
+    max_frames: float = 8.0
+    unmeasured_frames: float = 2.0
+    hole_decay: float = 0.8
+    fill_evidence: float = 1.0
+    depth_test: float = 2.0
+    outlier_test: Optional[float] = 4.0
+    color_test: float = 0.03
+    camera_test: Optional[float] = 0.8
+    window: int = 3
+    dilate: int = 2
+    reuse_matches: bool = True
+    _NAME: ClassVar[str] = "stream"
+    _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
+                               "hole_decay": real(0.0, 1.0, False), "fill_evidence": positive,
+                               "depth_test": positive, "camera_test": optional(real(0.0, 1.0)),
+                               "outlier_test": optional(positive), "color_test": positive,
+                               "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean}

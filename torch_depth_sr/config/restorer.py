@@ -14,7 +14,7 @@ from .domains import choice, integer, str_tuple
 from .version1 import FLAT_FIELDS, version1_settings
 from .groups import (BlockMatchingConfig, CleanSamples, EdgeRefit, EdgeSnap, FidelityBand, Group, Guidance,
                      GuidedPrior, InitConfig, LayerWeights, OutputHold, Refiner, SidedFill, SingularConfig,
-                     SolverConfig, UpsamplingConfig, ValuePrior)
+                     SolverConfig, StreamConfig, UpsamplingConfig, ValuePrior)
 
 __all__ = ["RestorerConfig", "TERMS", "from_version1", "load_config_file"]
 
@@ -61,6 +61,7 @@ class RestorerConfig:
     edge_refit: Optional[EdgeRefit] = field(default_factory=EdgeRefit)
     guidance: Optional[Guidance] = None
     refiner: Optional[Refiner] = None
+    stream: Optional[StreamConfig] = None
 
     def __post_init__(self) -> None:
         """Refuse any field outside its domain, naming the field, the value and what is allowed."""
@@ -133,9 +134,9 @@ class RestorerConfig:
 _GROUPS: dict = {f.name: t for f, t in zip(dataclasses.fields(RestorerConfig), (
     None, None, None, LayerWeights, BlockMatchingConfig, SingularConfig, SolverConfig, InitConfig, UpsamplingConfig,
     SidedFill, ValuePrior, CleanSamples, GuidedPrior, FidelityBand, OutputHold, EdgeSnap, EdgeRefit, Guidance,
-    Refiner)) if t is not None}
+    Refiner, StreamConfig)) if t is not None}
 _OPTIONAL = {"sided_fill", "value_prior", "clean_samples", "guided_prior", "fidelity", "upsample_hold", "edge_snap",
-             "edge_refit", "guidance", "refiner"}
+             "edge_refit", "guidance", "refiner", "stream"}
 _TOP_LEVEL = {"num_layers", "degradation"}
 
 

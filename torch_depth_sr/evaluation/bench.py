@@ -108,6 +108,10 @@ def run_bench(args: argparse.Namespace) -> int:
         from .speed import run_speed
 
         return run_speed(args)
+    if args.track == "stream":
+        from .stream import run_stream_track
+
+        return run_stream_track(args)
     if args.track == "gdsr":
         from .gdsr import run_gdsr
 

@@ -56,10 +56,13 @@ __all__ = [
     "run_speed",
 ]
 
-METHODS = ("full", "fast", "best", "full-fast", "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary",
-           "kornia-jbf9", "dataloader")
+METHODS = ("full", "fast", "best", "full-fast", "stream", "stream-fast", "bm-exact", "bm-refine", "x0-filter", "jbf",
+           "dictionary", "kornia-jbf9", "dataloader")
 # the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best
 MODEL_PRESETS = {"full": "default", "fast": "fast", "best": "best", "full-fast": "fast"}
+# "stream", "stream-fast": a step of a StreamRestorer of the default / fast model on the inputs' static scene with new
+# noise (σ = 5) and the same holes every call (the warm-up call is the stream's first, cold, frame; the timed calls
+# are stream steps; the rmse is the last step's).
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
 # "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240, the fast tier) once and reports its
@@ -114,6 +117,24 @@ def _make_runner(method: str, device: str):
             return r.depth, r.info
 
         return run
+    if method in ("stream", "stream-fast"):
+        from ..model import DepthRestorer
+        from ..stream import StreamRestorer
+
+        stream = StreamRestorer(DepthRestorer.from_preset("default" if method == "stream" else "fast").to(device))
+        g = torch.Generator(device="cpu").manual_seed(1)
+        scene: dict = {}
+
+        def step(y, rgb):
+            if "gt" not in scene:  # the inputs' scene (make_inputs' defaults): each call a new frame of its noise
+                _, _, gt = make_inputs(y.shape[-2], y.shape[-1], y.shape[0])
+                scene.update(gt=gt.to(y), holes=y <= 0)
+            noise = (5.0 * torch.randn(y.shape, generator=g)).to(y)
+            frame = torch.where(scene["holes"], torch.zeros_like(y), (scene["gt"] + noise).clamp_min(1.0))
+            r = stream.step(frame, rgb, return_details=True, timings=True)
+            return r.depth, r.info
+
+        return step
     if method in ("bm-exact", "bm-refine", "x0-filter"):
         return _stage_runner(method)
     if method == "jbf":

@@ -11,7 +11,7 @@
 from .layouts import Frame, Sequence, associate_timestamps, discover_recordings
 from .manifest import read_manifest
 from .restore import RestoreSummary, restore_dataset
-from .restorers import FrameByFrame, PretrainedRestorer
+from .restorers import FrameByFrame, PretrainedRestorer, Streaming
 
-__all__ = ["Frame", "FrameByFrame", "PretrainedRestorer", "RestoreSummary", "Sequence", "associate_timestamps",
-           "discover_recordings", "read_manifest", "restore_dataset"]
+__all__ = ["Frame", "FrameByFrame", "PretrainedRestorer", "RestoreSummary", "Sequence", "Streaming",
+           "associate_timestamps", "discover_recordings", "read_manifest", "restore_dataset"]

@@ -56,6 +56,10 @@ def add_recordings_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--threads", type=_threads, default=None,
                    help="torch threads per process (default: as set by OMP_NUM_THREADS/torch; --workers share them); "
                         "runs that must give identical bits need the same value")
+    g.add_argument("--stream", action="store_true",
+                   help="restore each sequence as a stream (torch_depth_sr.StreamRestorer: a frame helped by the "
+                        "frames before it - less flicker, holes held from a confident past, cheaper frames); "
+                        "default: every frame on its own, as restore does. See docs/stream.md")
     g.add_argument("--max-time-difference", type=_seconds, default=TUM_MAX_DIFFERENCE, metavar="SECONDS",
                    help="TUM depth.txt + rgb.txt: largest time between a depth frame and its colour frame "
                         f"(default {TUM_MAX_DIFFERENCE})")
@@ -81,7 +85,7 @@ def restore_recordings(args: argparse.Namespace) -> int:
     if getattr(args, "resume", False) and getattr(args, "skip_existing", False):
         raise UsageError("--resume and --skip-existing: use --resume alone")
     kwargs = {} if args.scale_factor is None else {"scale_factor": args.scale_factor}
-    factory = PretrainedRestorer(args.pretrained, args.device, **kwargs)
+    factory = PretrainedRestorer(args.pretrained, args.device, stream=bool(getattr(args, "stream", False)), **kwargs)
     factory.load_model()  # an unknown --pretrained name: one line, before anything is read or written
     rank = int(os.environ.get("RANK", "0") or 0)
     try:

@@ -24,7 +24,7 @@ from ..errors import UsageError
 if TYPE_CHECKING:
     from ..model import DepthRestorer
 
-__all__ = ["Restorer", "FrameByFrame", "PretrainedRestorer"]
+__all__ = ["Restorer", "FrameByFrame", "PretrainedRestorer", "Streaming"]
 
 
 class Restorer(Protocol):
@@ -62,15 +62,46 @@ class FrameByFrame:
             return restore_depth(depth, rgb, model=self.model, **self.kwargs)
 
 
+class Streaming:
+    """Each sequence as a stream: a :class:`~torch_depth_sr.StreamRestorer` of ``model`` (a frame helped by the frames
+    before it; ``reset()`` before each sequence), so a resumed sequence is replayed from its first frame.
+
+    Args:
+        model: a :class:`~torch_depth_sr.DepthRestorer`.
+        **kwargs: ``fill``, ``noise_sigma``, ``scale_factor`` of :meth:`~torch_depth_sr.StreamRestorer.step`.
+    """
+
+    stateful = True
+
+    def __init__(self, model: "DepthRestorer", **kwargs: Any):
+        from ..stream import StreamRestorer
+
+        fill = kwargs.pop("fill", "all")
+        self.stream = StreamRestorer(model, fill=fill)
+        self.kwargs = kwargs
+        p = next(iter(model.parameters()), None)
+        self.device = p.device if p is not None else torch.device("cpu")
+
+    def reset(self) -> None:
+        self.stream.reset()
+
+    def step(self, depth: Any, rgb: Optional[torch.Tensor]) -> Any:
+        if rgb is not None:
+            rgb = rgb[None].to(self.device)
+        with torch.no_grad():
+            return self.stream.step(depth, rgb, **self.kwargs)
+
+
 class PretrainedRestorer:
     """Factory of :class:`FrameByFrame` restorers running ``DepthRestorer.from_pretrained(name)`` (``None``: the
-    default ``DepthRestorer()``) on ``device``; picklable, so it can travel to worker processes.
+    default ``DepthRestorer()``) on ``device`` — of :class:`Streaming` ones with ``stream=True``; picklable, so it
+    can travel to worker processes.
 
     ``device="cuda"`` under ``torchrun`` means ``cuda:$LOCAL_RANK`` (one GPU per rank).
     """
 
-    def __init__(self, name: Optional[str] = None, device: str = "cpu", **kwargs: Any):
-        self.name, self.device, self.kwargs = name, device, kwargs
+    def __init__(self, name: Optional[str] = None, device: str = "cpu", stream: bool = False, **kwargs: Any):
+        self.name, self.device, self.stream, self.kwargs = name, device, stream, kwargs
         self._model = None
 
     def __getstate__(self) -> dict:
@@ -97,11 +128,11 @@ class PretrainedRestorer:
             self._model = model.to(_rank_device(self.device))  # as `restore` runs it
         return self._model
 
-    def __call__(self) -> FrameByFrame:
-        return FrameByFrame(self.load_model(), **self.kwargs)
+    def __call__(self) -> "FrameByFrame | Streaming":
+        return (Streaming if self.stream else FrameByFrame)(self.load_model(), **self.kwargs)
 
     def __repr__(self) -> str:
-        return f"PretrainedRestorer({self.name!r}, device={self.device!r})"
+        return f"PretrainedRestorer({self.name!r}, device={self.device!r}, stream={self.stream})"
 
 
 def _rank_device(device: str) -> torch.device:

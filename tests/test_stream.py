@@ -1,0 +1,350 @@
+"""The streaming restorer (issue 28 item 1): the first frame is restore_depth's, reset(), batched streams, less
+flicker on a static scene, no trail behind a moving object, holes filled only from a confident past, inputs left
+alone, numpy/uint16 in and out, training through a stream; the change test, the reused matches and the recordings
+factory."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from torch_depth_sr import DepthRestorer, StreamRestorer, restore_depth
+from torch_depth_sr.config import RestorerConfig, StreamConfig
+from torch_depth_sr.errors import ShapeError
+from torch_depth_sr.stream import with_stream
+from torch_depth_sr.terms import TemporalPriorTerm
+
+H, W = 40, 48
+
+
+def small_model(**kw) -> DepthRestorer:
+    """A quick model: 3 layers, a 7x7 window, 6 matches."""
+    return DepthRestorer(num_layers=3, block_matching={"search_window": 7, "k": 6, "match_layers": (1,)}, **kw)
+
+
+def _scene(seed: int = 0):
+    """Two slanted planes of different colour and depth (mm), a depth gap at the middle column."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    gt = np.where(xx < W // 2, 1000 + 2 * yy, 1600 + xx).astype(np.float32)
+    rgb = np.zeros((3, H, W), np.float32)
+    rgb[:, :, : W // 2] = np.array([0.8, 0.3, 0.2], np.float32)[:, None, None]
+    rgb[:, :, W // 2:] = np.array([0.2, 0.4, 0.8], np.float32)[:, None, None]
+    rgb += 0.05 * np.sin(xx / 3)[None]  # texture
+    return gt, rgb
+
+
+def _noisy(gt: np.ndarray, t: int, sigma: float = 6.0, holes: float = 0.03) -> np.ndarray:
+    rng = np.random.default_rng(1000 + t)
+    d = np.round(gt + sigma * rng.standard_normal(gt.shape))
+    d[rng.random(gt.shape) < holes] = 0
+    return d.astype(np.uint16)
+
+
+def test_first_frame_is_restore_depth_bit_for_bit():
+    gt, rgb = _scene()
+    d = _noisy(gt, 0)
+    m = small_model()
+    s = StreamRestorer(m)
+    assert np.array_equal(s.step(d, rgb.transpose(1, 2, 0)), restore_depth(d, rgb.transpose(1, 2, 0), model=m))
+    # torch float, trusted fill, details: the same as the model's
+    y = torch.from_numpy(d.astype(np.float32))[None, None]
+    s.reset()
+    r = s.step(y, torch.from_numpy(rgb)[None], return_details=True, fill="trusted")
+    ref = restore_depth(y, torch.from_numpy(rgb)[None], model=m, return_details=True, fill="trusted")
+    assert torch.equal(torch.nan_to_num(r.depth, 7.0), torch.nan_to_num(ref.depth, 7.0))
+    assert torch.equal(r.confidence, ref.confidence) and torch.equal(r.trusted, ref.trusted)
+    assert not bool(r.static.any()) and r.info["stream"]["frame"] == 0
+
+
+def test_default_model_and_the_per_frame_model_is_untouched():
+    s = StreamRestorer()
+    assert s.model.config.stream == StreamConfig() and DepthRestorer().config.stream is None
+    m = small_model()
+    before = repr(m)
+    StreamRestorer(m)
+    assert repr(m) == before  # the stream's term lives in its own variant of the layers
+    assert not any(isinstance(t, TemporalPriorTerm) for layer in m.layers for t in layer.terms["denoise"])
+
+
+def test_reset_starts_a_new_stream():
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m)
+    for t in range(3):
+        s.step(_noisy(gt, t), rgb)
+    d = _noisy(gt, 9)
+    assert not np.array_equal(s.step(d, rgb), restore_depth(d, rgb[None], model=m))
+    s.reset()
+    assert s.state is None and s.frames == 0
+    assert np.array_equal(s.step(d, rgb), restore_depth(d, rgb[None], model=m))
+
+
+def test_batched_streams_equal_one_stream_each():
+    gt, rgb = _scene()
+    gt2 = gt[:, ::-1].copy() + 50
+    m = small_model()
+    batched, one, two = StreamRestorer(m), StreamRestorer(m), StreamRestorer(m)
+    rgbs = torch.from_numpy(np.stack([rgb, rgb[:, :, ::-1].copy()]))
+    for t in range(4):
+        a = torch.from_numpy(_noisy(gt, t).astype(np.float32))
+        b = torch.from_numpy(_noisy(gt2, 50 + t).astype(np.float32))
+        out = batched.step(torch.stack([a, b])[:, None], rgbs)
+        ra = one.step(a[None, None], rgbs[:1])
+        rb = two.step(b[None, None], rgbs[1:])
+        torch.testing.assert_close(out, torch.cat([ra, rb]), rtol=1e-5, atol=1e-3)
+
+
+def test_a_frame_of_another_size_needs_reset():
+    gt, rgb = _scene()
+    s = StreamRestorer(small_model())
+    s.step(_noisy(gt, 0), rgb)
+    with pytest.raises(ShapeError, match="reset"):
+        s.step(_noisy(gt, 1)[:, :40], rgb[:, :, :40])
+
+
+def _restore_all(make, frames, rgbs):
+    out = []
+    for d, c in zip(frames, rgbs):
+        out.append(make(d, c).astype(np.float64))
+    return np.stack(out)
+
+
+def test_a_static_scene_flickers_less_than_frame_by_frame():
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m)
+    frames = [_noisy(gt, t) for t in range(8)]
+    per_frame = _restore_all(lambda d, c: restore_depth(d, c[None], model=m), frames, [rgb] * 8)
+    stream = _restore_all(lambda d, c: s.step(d, c), frames, [rgb] * 8)
+    f_frame = (per_frame[3:] - gt).std(0).mean()
+    f_stream = (stream[3:] - gt).std(0).mean()
+    assert f_stream < 0.6 * f_frame, (f_stream, f_frame)
+    rmse = lambda o: np.sqrt(((o[3:] - gt) ** 2).mean())  # noqa: E731
+    assert rmse(stream) < rmse(per_frame)
+
+
+def _moving_square(t: int):
+    """A near square (600 mm, green) moving 3 px per frame to the right over the two planes."""
+    gt, rgb = _scene()
+    gt, rgb = gt.copy(), rgb.copy()
+    x0 = 4 + 3 * t
+    gt[12:26, x0:x0 + 12] = 600
+    rgb[:, 12:26, x0:x0 + 12] = np.array([0.1, 0.9, 0.1], np.float32)[:, None, None]
+    return gt, rgb
+
+
+def test_a_moving_object_leaves_no_trail():
+    m = small_model()
+    s = StreamRestorer(m)
+    err_stream, err_frame = [], []
+    for t in range(8):
+        gt, rgb = _moving_square(t)
+        d = _noisy(gt, t)
+        a, b = s.step(d, rgb).astype(np.float64), restore_depth(d, rgb[None], model=m).astype(np.float64)
+        if t >= 2:  # near the square now and where it was in the two frames before
+            near = np.zeros_like(gt, bool)
+            for k in range(3):
+                x0 = 4 + 3 * (t - k)
+                near[10:28, max(0, x0 - 2):x0 + 14] = True
+            err_stream.append(np.abs(a - gt)[near])
+            err_frame.append(np.abs(b - gt)[near])
+    rmse = lambda e: float(np.sqrt(np.mean(np.concatenate(e) ** 2)))  # noqa: E731
+    assert rmse(err_stream) <= 1.05 * rmse(err_frame), (rmse(err_stream), rmse(err_frame))
+    # the background the square uncovered is the background, not the square
+    gt, _ = _moving_square(7)
+    uncovered = np.zeros_like(gt, bool)
+    uncovered[12:26, 4 + 3 * 5:4 + 3 * 7] = True
+    assert np.abs(a - gt)[uncovered].max() < 100
+
+
+def test_holes_are_filled_only_from_a_confident_past_never_across_a_gap():
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m, fill="trusted")
+    gap = slice(W // 2 - 4, W // 2 + 4)  # columns around the depth gap (the colours differ, the fill is ambiguous)
+    # the gap band measured in the first frames: later holes there are filled from the past, on the right side
+    for t in range(4):
+        s.step(_noisy(gt, t, holes=0.0), rgb)
+    d = _noisy(gt, 4, holes=0.0)
+    d[10:30, gap] = 0
+    r = s.step(d, rgb, return_details=True)
+    filled = r.depth[10:30, gap].astype(np.float64)
+    assert (filled > 0).all()
+    assert np.abs(filled - gt[10:30, gap]).max() < 30  # the past value of each side, not a blend across the gap
+    assert (r.confidence[10:30, gap] > 0).all()
+
+
+def test_never_measured_holes_stay_holes_after_the_first_frame():
+    """A hole the past never measured keeps the first frame's verdict while it stays a hole and its colour does not
+    change: it never turns into a fill from the past."""
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m, fill="trusted")
+    never = np.zeros_like(gt, bool)
+    never[5:35, W // 2 - 4:W // 2 + 4] = True
+    verdicts = []
+    for t in range(5):
+        d = _noisy(gt, t, holes=0.0)
+        d[never] = 0
+        r = s.step(d, rgb, return_details=True)
+        verdicts.append(r.depth[never] > 0)
+        assert (r.evidence[never] == 0).all()  # no evidence where nothing was measured
+    first = restore_depth(_noisy(gt, 0, holes=0.0) * ~never, rgb[None], model=m, fill="trusted")[never] > 0
+    assert all(np.array_equal(v, first) for v in verdicts)
+
+
+def test_inputs_are_not_modified():
+    gt, rgb = _scene()
+    s = StreamRestorer(small_model())
+    for t in range(3):
+        d = _noisy(gt, t)
+        d0, c0 = d.copy(), rgb.copy()
+        s.step(d, rgb)
+        assert np.array_equal(d, d0) and np.array_equal(rgb, c0)
+    y = torch.from_numpy(_noisy(gt, 5).astype(np.float32))[None, None]
+    y0 = y.clone()
+    s(y, torch.from_numpy(rgb)[None])
+    assert torch.equal(y, y0)
+
+
+@pytest.mark.parametrize("layout", ["hw", "1hw"])
+def test_numpy_uint16_round_trip(layout):
+    gt, rgb = _scene()
+    s = StreamRestorer(small_model())
+    rgb8 = (rgb.transpose(1, 2, 0) * 255).round().astype(np.uint8)
+    for t in range(3):
+        d = _noisy(gt, t)
+        d = d if layout == "hw" else d[None]
+        out = s.step(d, rgb8)
+        assert isinstance(out, np.ndarray) and out.dtype == np.uint16 and out.shape == d.shape
+        assert (out > 0).all()  # fill="all": every hole filled
+    r = s.step(d, rgb8, return_details=True)
+    assert r.depth.dtype == np.uint16 and r.confidence.shape == d.shape and r.static.shape == d.shape
+    assert isinstance(r.evidence, np.ndarray) and r.info["stream"]["frame"] == 3
+
+
+def test_gradients_reach_the_model_in_a_training_loop():
+    gt, rgb = _scene()
+    m = small_model(trainable=True)
+    s = StreamRestorer(m)
+    assert {id(p) for p in s.parameters()} == {id(p) for p in m.parameters()}  # the model's own parameters
+    opt = torch.optim.Adam(m.parameters(), lr=1e-2)
+    before = m.layers[0].raw_lam.detach().clone()
+    g = torch.from_numpy(gt)[None, None]
+    c = torch.from_numpy(rgb)[None]
+    for t in range(3):
+        y = torch.from_numpy(_noisy(gt, t).astype(np.float32))[None, None]
+        out = s(y, c)
+        loss = ((out - g) ** 2).mean()
+        opt.zero_grad()
+        loss.backward()
+        grads = [p.grad for p in m.parameters() if p.requires_grad]
+        assert all(gr is not None and torch.isfinite(gr).all() for gr in grads)
+        assert any(float(gr.abs().sum()) > 0 for gr in grads)
+        opt.step()
+    assert not torch.equal(before, m.layers[0].raw_lam.detach())
+    assert s.state is not None and not s.state.depth.requires_grad  # the state carries no graph
+
+
+def test_with_stream_shares_everything_but_the_terms():
+    m = small_model()
+    v = with_stream(m, StreamConfig())
+    assert v.block_matcher is m.block_matcher and v.init is m.init
+    assert all(a.raw_lam is b.raw_lam for a, b in zip(v.layers, m.layers))
+    assert isinstance(v.layers[0].terms["denoise"][-1], TemporalPriorTerm)
+    assert with_stream(v, StreamConfig()) is v
+    assert DepthRestorer(RestorerConfig(stream={})).config.stream == StreamConfig()
+
+
+def test_stream_settings_are_checked():
+    from torch_depth_sr import ParameterError
+
+    with pytest.raises(ParameterError, match="stream.hole_decay"):
+        RestorerConfig(stream={"hole_decay": 2.0})
+    s = StreamRestorer(small_model(), {"max_frames": 4})
+    assert s.settings.max_frames == 4
+
+
+def test_change_test_sees_motion_and_ignores_noise_and_outliers():
+    from torch_depth_sr.stream import change_test
+
+    g = torch.Generator().manual_seed(0)
+    prev = torch.full((1, 1, 32, 32), 10.0)
+    y = prev + torch.randn(prev.shape, generator=g)  # noise of 1
+    y[0, 0, 5, 5] = 40.0  # an impulse
+    y[0, 0, 16:24, 16:24] += 8.0  # a surface that moved
+    rgb = torch.rand(1, 3, 32, 32, generator=g)
+    t = change_test(y, torch.ones_like(y), prev, torch.tensor([1.0]), rgb, rgb.clone(), StreamConfig())
+    assert bool(t.changed[0, 0, 18:22, 18:22].all()) and not bool(t.changed[0, 0, :10, :10].any())
+    assert bool(t.outlier[0, 0, 5, 5]) and int(t.outlier.sum()) <= 3
+    rgb2 = rgb.clone()
+    rgb2[..., 2:6, 26:30] = 1 - rgb2[..., 2:6, 26:30]  # a colour change without a depth change
+    t2 = change_test(prev, torch.ones_like(y), prev, torch.tensor([1.0]), rgb2, rgb, StreamConfig())
+    assert bool(t2.changed[0, 0, 3, 27]) and not bool(t2.changed[0, 0, 20, 5])
+
+
+def test_a_moving_camera_changes_every_pixel():
+    from torch_depth_sr.stream import change_test
+    from torch_depth_sr.stream.change import camera_moved
+
+    g = torch.Generator().manual_seed(1)
+    rgb = torch.rand(1, 3, 40, 48, generator=g)
+    moved = torch.roll(rgb, shifts=(1, 2), dims=(2, 3))
+    assert float(camera_moved(moved, rgb)) < 0.5 and float(camera_moved(rgb, rgb)) == 1.0
+    one = rgb.clone()
+    one[..., 10:20, 10:20] = torch.rand(1, 3, 10, 10, generator=g)  # an object, not the camera
+    assert float(camera_moved(one, rgb)) > 0.9
+    depth = torch.full((1, 1, 40, 48), 5.0)
+    t = change_test(depth, torch.ones_like(depth), depth, torch.tensor([1.0]), moved, rgb, StreamConfig())
+    assert bool(t.changed.all())
+
+
+def test_reused_matches_equal_the_search_where_it_runs():
+    from torch_depth_sr.observation import observe
+    from torch_depth_sr.operators import Identity
+    from torch_depth_sr.stream import StreamMatcher
+
+    m = DepthRestorer(block_matching={"search_window": 9, "k": 8})
+    gt, rgb = _scene()
+    y = torch.from_numpy(_noisy(gt, 0, holes=0.0).astype(np.float32))[None, None]
+    c = torch.from_numpy(rgb)[None]
+    obs = observe(y, torch.ones_like(y), c, Identity(), None, True, m.block_matcher, False)
+    full = m.block_matcher(obs.y, obs, obs.observed)
+    fresh = torch.zeros_like(y, dtype=torch.bool)
+    fresh[..., 10:16, 20:30] = True
+    kept = (full.dist.flip(1), full.index.flip(1))
+    sm = StreamMatcher(m.block_matcher, kept, fresh)
+    mix = sm(obs.y, obs, obs.observed)
+    f = fresh.expand_as(full.index)
+    assert torch.equal(mix.index[f], full.index[f]) and torch.equal(mix.index[~f], kept[1][~f])
+    assert sm.searched < H * W  # a crop, not the whole frame
+    again = sm.rematch(obs.y, obs, obs.observed, full)
+    assert torch.equal(again.index[f], m.block_matcher.rematch(obs.y, obs, obs.observed, full).index[f])
+
+
+def test_recordings_factory_streams_and_replays(tmp_path):
+    import cv2
+
+    from torch_depth_sr.recordings import PretrainedRestorer, restore_dataset
+
+    gt, rgb = _scene()
+    root = tmp_path / "rec"
+    for t in range(3):
+        (root / "depth").mkdir(parents=True, exist_ok=True)
+        (root / "rgb").mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(root / "depth" / f"{t:03d}.png"), _noisy(gt, t))
+        cv2.imwrite(str(root / "rgb" / f"{t:03d}.png"), (rgb.transpose(1, 2, 0)[..., ::-1] * 255).astype(np.uint8))
+    factory = PretrainedRestorer(None, stream=True)
+    restorer = factory()
+    assert restorer.stateful
+    factory._model = small_model()  # a quick model for the test
+    summary = restore_dataset(root, tmp_path / "out", restorer=factory, progress=False)
+    assert summary.ok and summary.written == 3
+    stream = StreamRestorer(small_model())
+    for t in range(3):
+        d = cv2.imread(str(root / "depth" / f"{t:03d}.png"), cv2.IMREAD_UNCHANGED)
+        c = torch.from_numpy(cv2.cvtColor(cv2.imread(str(root / "rgb" / f"{t:03d}.png")), cv2.COLOR_BGR2RGB)
+                             .astype(np.float32) / 255).permute(2, 0, 1)
+        expected = stream.step(d, c[None])
+        written = cv2.imread(str(tmp_path / "out" / "rec" / "depth" / f"{t:03d}.png"), cv2.IMREAD_UNCHANGED)
+        assert np.array_equal(written, expected), t

@@ -1,0 +1,146 @@
+"""The per-pixel change test of a stream: which pixels show the scene of the previous frame.
+
+Each measured pixel is compared with the previous restored frame in units of its noise (:func:`distances`): ``d0``
+with the previous value at the pixel, ``d1`` with the nearest of the previous values in its 3×3 neighbourhood (an
+edge that the previous estimate placed one pixel off, or that moved by one pixel, is no change of the surface).
+
+A pixel is *changed* (:func:`change_test`) when its colour or its depth changed around it:
+
+* colour: the mean over the ``window × window`` window of the absolute colour change (averaged over the channels,
+  after each channel's median change over the frame is removed: an exposure or white-balance step moves the whole
+  frame, not the scene) exceeds ``color_test`` (colour in [0, 1]);
+* depth: more than half of the measured pixels of the window have ``d1 > depth_test``. The noise unit is the local
+  spread of the measurements about the restored depth in the previous frame (:func:`local_spread`, a window mean
+  of ``|y − x|``: a sensor's noise grows with the distance, so one noise level for the frame would call every far
+  surface changed), at least a quarter of the frame's noise level and the quantisation step. A majority vote is a
+  median test: flying pixels and impulses, a minority of any window even at depth edges, flag nothing, while a
+  surface that moved flags its whole window. Three pseudo-votes of "unchanged" join every window, so that a window
+  of a few measured pixels among holes needs all of them.
+
+The changed pixels are then dilated by ``dilate`` pixels (a moving edge's neighbours). In a static window a single
+measured pixel can still disagree with the past: if its value matches none of the previous values near it (``d1 >
+outlier_test``) it is an *outlier in time* — a flying pixel, an impulse — that the stream drops where the past was
+measured confidently. One that matches a neighbour's previous value (``d1`` small, ``d0`` large: an edge placed one
+pixel off before) is kept, and so is the pixel's static run: the measurement and the past settle the edge between
+them over the next frames.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+import torch
+import torch.nn.functional as F
+
+from ..config import StreamConfig
+from .matching import dilate
+
+__all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "depth_votes", "distances", "local_spread"]
+
+_PRIOR = 6.0  # pseudo-votes of "unchanged" per window
+
+
+def _window_mean(v: torch.Tensor, window: int,
+                 weight: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """The window sums of ``v·weight`` and of ``weight`` (the mean is their ratio), zero padding."""
+    pad = window // 2
+    if weight is None:
+        weight = torch.ones_like(v)
+    num = F.avg_pool2d(v * weight, window, stride=1, padding=pad, count_include_pad=True)
+    den = F.avg_pool2d(weight, window, stride=1, padding=pad, count_include_pad=True)
+    return num, den
+
+
+def local_spread(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, window: int) -> torch.Tensor:
+    """(B,1,H,W): the window mean of ``|y − x|`` over the measured pixels (0 where the window has none): the local
+    noise of the measurements about the restored depth ``x``."""
+    m = (observed > 0).to(y.dtype)
+    num, den = _window_mean(torch.where(m > 0, (y - x).abs(), torch.zeros_like(y)), window, m)
+    return torch.where(den > 0, num / den.clamp_min(1e-12), torch.zeros_like(num))
+
+
+def distances(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
+              noise: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(d0, d1)`` (B,1,H,W): ``|y − previous| / noise`` at the pixel and the smallest ``|y − previous_j| / noise``
+    over the 3×3 neighbourhood ``j`` (the pixel included); 0 where ``y`` is not measured. ``noise`` (B,) or
+    (B,1,H,W)."""
+    noise = noise.view(-1, 1, 1, 1) if noise.ndim == 1 else noise
+    h, w = y.shape[-2:]
+    padded = F.pad(previous, (1, 1, 1, 1), mode="replicate")
+    d0 = (y - previous).abs()
+    d1 = d0
+    for dy in range(3):
+        for dx in range(3):
+            if (dy, dx) != (1, 1):
+                d1 = torch.minimum(d1, (y - padded[..., dy:dy + h, dx:dx + w]).abs())
+    m = observed > 0
+    zero = torch.zeros_like(d0)
+    return torch.where(m, d0 / noise, zero), torch.where(m, d1 / noise, zero)
+
+
+def depth_votes(d1: torch.Tensor, observed: torch.Tensor, window: int, threshold: float) -> torch.Tensor:
+    """(B,1,H,W): the share of the window's votes that say "changed" (measured pixels with ``d1 > threshold``)
+    among the measured pixels and three pseudo-votes of "unchanged"."""
+    m = (observed > 0).to(d1.dtype)
+    far = ((d1 > threshold) & (m > 0)).to(d1.dtype)
+    num, den = _window_mean(far, window, m)
+    n = window * window
+    return (num * n) / (den * n + _PRIOR)
+
+
+def camera_moved(rgb: torch.Tensor, previous: torch.Tensor, reach: int = 2) -> torch.Tensor:
+    """(B,) the ratio of the smallest mean colour change over the frame after a shift of the previous image by up to
+    ``reach`` px (not 0) to the mean change without a shift: well below 1 when the camera moved (the whole image
+    moved), about 1 or above when only some objects did, 1 when the image did not change at all."""
+    a, b = rgb.mean(1, keepdim=True), previous.mean(1, keepdim=True)
+    a = a - a.flatten(1).mean(1).view(-1, 1, 1, 1)
+    b = b - b.flatten(1).mean(1).view(-1, 1, 1, 1)
+    core = a[..., reach:-reach, reach:-reach]
+    h, w = core.shape[-2:]
+    still = (core - b[..., reach:reach + h, reach:reach + w]).abs().flatten(1).mean(1)
+    best = torch.full_like(still, float("inf"))
+    for dy in range(-reach, reach + 1):
+        for dx in range(-reach, reach + 1):
+            if dy or dx:
+                moved = (core - b[..., reach + dy:reach + dy + h, reach + dx:reach + dx + w]).abs().flatten(1).mean(1)
+                best = torch.minimum(best, moved)
+    # an image that did not change (the mean change below 1/255) did not move, however well a shift matches it
+    return torch.where(still > 1.0 / 255, best / still.clamp_min(1e-12), torch.ones_like(still))
+
+
+def color_change(rgb: torch.Tensor, previous: torch.Tensor, window: int) -> torch.Tensor:
+    """(B,1,H,W): the window mean of the absolute colour change, each channel's median change removed."""
+    diff = rgb - previous
+    diff = diff - diff.flatten(2).median(dim=2).values[..., None, None]
+    num, den = _window_mean(diff.abs().mean(1, keepdim=True), window)
+    return num / den
+
+
+class ChangeTest(NamedTuple):
+    """The outcome of :func:`change_test`, each (B,1,H,W) bool."""
+
+    changed: torch.Tensor  # the window test, dilated: the pixel starts a new static run
+    outlier: torch.Tensor  # in a static window, a measurement that matches no previous value near it
+    seen: torch.Tensor  # the change as the colour alone sees it (dilated), or as changed without colour
+
+
+def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor, noise: torch.Tensor,
+                rgb: Optional[torch.Tensor], previous_rgb: Optional[torch.Tensor],
+                settings: StreamConfig) -> ChangeTest:
+    """The change test of one frame (module docstring); ``y``, ``previous`` and ``noise`` in the units of one
+    frame. Without ``settings.outlier_test`` no pixel is an *outlier*."""
+    with torch.no_grad():
+        _, d1 = distances(y, observed, previous, noise)
+        changed = depth_votes(d1, observed, settings.window, settings.depth_test) > 0.5
+        seen = None
+        if rgb is not None and previous_rgb is not None:
+            previous_rgb = previous_rgb.to(rgb)
+            seen = dilate(color_change(rgb, previous_rgb, settings.window) > settings.color_test, settings.dilate)
+            if settings.camera_test is not None and min(rgb.shape[-2:]) > 8:
+                moved = (camera_moved(rgb, previous_rgb) < settings.camera_test).view(-1, 1, 1, 1)
+                seen = seen | moved
+        changed = dilate(changed, settings.dilate)
+        changed = changed if seen is None else changed | seen
+        seen = changed if seen is None else seen
+        if settings.outlier_test is None:
+            return ChangeTest(changed, torch.zeros_like(changed), seen)
+        return ChangeTest(changed, ~changed & (d1 > settings.outlier_test), seen)

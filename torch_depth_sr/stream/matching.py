@@ -1,0 +1,149 @@
+"""Block matching in a stream: the previous frame's matches where the scene has not changed, a search elsewhere.
+
+A pixel whose whole search window (and the blocks around the candidates) is static sees the same blocks as in the
+previous frame, so its matches are still the best ones: :class:`StreamMatcher` keeps them (their distances, with
+the weights recomputed at the model's current temperature, so that the temperature still learns). The other pixels
+are searched as the model searches them (the exact search for x⁰, the model's re-matching in its scheduled layers),
+on rectangles around them: each is padded by the search radius plus the block radius, so that every candidate
+block of its core lies inside it and its matches equal those of the whole image there.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Optional
+
+import torch
+import torch.nn.functional as F
+
+from ..block_matching import BlockMatches
+from ..block_matching._common import candidates_everywhere, finish
+from ..config import BlockMatchingConfig
+from ..observation import Observation
+from ..stages import BlockMatcher
+
+__all__ = ["StreamMatcher", "crops", "dilate", "search_radius"]
+
+
+def search_radius(settings: BlockMatchingConfig, task: str) -> int:
+    """The reach of a pixel's matches in pixels: the search radius plus the block radius."""
+    window, _ = settings.window_and_k()[task]
+    return window // 2 + settings.block_size // 2
+
+
+def _runs(flags: torch.Tensor, pad: int, size: int) -> list[tuple[int, int, int, int]]:
+    """Runs ``(a, b, c0, c1)`` covering the ``True`` entries of ``flags (N,)``: the crop ``[a, b)`` (the run padded by
+    ``pad``, clipped to ``[0, size)``) and its core ``[c0, c1)``. Runs whose crops would overlap are merged."""
+    runs: list[list[int]] = []
+    for i in torch.nonzero(flags).flatten().tolist():
+        if runs and i <= runs[-1][1] + 2 * pad + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    return [(max(0, c0 - pad), min(size, c1 + 1 + pad), c0, c1 + 1) for c0, c1 in runs]
+
+
+def crops(fresh: torch.Tensor, pad: int) -> list[tuple[slice, slice, slice, slice]]:
+    """Rectangles that cover the ``True`` pixels of ``fresh (B,1,H,W)`` (over the batch): bands of rows, and in each
+    band runs of columns, each padded by ``pad`` (clipped to the image). Returns ``(rows, cols, core_rows,
+    core_cols)``: the crop and the part of it whose matches the crop gives exactly (every candidate block of a core
+    pixel lies in the crop)."""
+    h, w = fresh.shape[-2:]
+    any_b = fresh.flatten(0, 1).any(0)  # (H, W)
+    out = []
+    for a, b, r0, r1 in _runs(any_b.any(1), pad, h):
+        for c, d, q0, q1 in _runs(any_b[r0:r1].any(0), pad, w):
+            out.append((slice(a, b), slice(c, d), slice(r0, r1), slice(q0, q1)))
+    return out
+
+
+def _crop_matches(m: BlockMatches, rows: slice, cols: slice, width: int) -> BlockMatches:
+    """Matches of a crop with their flat indices in the crop's frame (indices outside the crop become -1)."""
+    index = m.index[..., rows, cols]
+    y, x = index // width - rows.start, index % width - cols.start
+    wc, hc = cols.stop - cols.start, rows.stop - rows.start
+    inside = (y >= 0) & (y < hc) & (x >= 0) & (x < wc)
+    index = torch.where(inside, y * wc + x, torch.full_like(index, -1))
+    return BlockMatches(m.dist[..., rows, cols], index, m.weight[..., rows, cols])
+
+
+class StreamMatcher:
+    """The model's :class:`~torch_depth_sr.stages.BlockMatcher` (``inner``) for one stream frame: the matches
+    ``previous`` (the previous frame's last, ``(dist, index)`` without gradient) are kept where ``fresh`` (B,1,H,W)
+    is False; the pixels where it is True are searched by ``inner`` on bands of rows. It stands where the model's
+    matcher stands (``obs.block_matcher``): x⁰'s matches (a call) and a scheduled layer's (:meth:`rematch`)."""
+
+    def __init__(self, inner: BlockMatcher, previous: tuple[torch.Tensor, torch.Tensor], fresh: torch.Tensor):
+        self.inner = inner
+        self.previous_dist, self.previous_index = previous
+        self.fresh = fresh
+        self.searched = 0  # pixels searched (crops included), summed over the calls of this frame
+
+    # the matcher's interface as the model's stages read it
+    @property
+    def settings(self) -> BlockMatchingConfig:
+        return self.inner.settings
+
+    @property
+    def temperature(self) -> torch.Tensor:
+        return self.inner.temperature
+
+    @property
+    def color_weight(self) -> torch.Tensor:
+        return self.inner.color_weight
+
+    def scheduled(self, index: int) -> bool:
+        return self.inner.scheduled(index)
+
+    def __call__(self, x: torch.Tensor, obs: Observation, q: torch.Tensor) -> BlockMatches:
+        """x⁰'s matches: the kept ones, and the exact search where fresh."""
+        return self._mix(x, obs, q, None)
+
+    def rematch(self, x: torch.Tensor, obs: Observation, q: torch.Tensor, previous: BlockMatches) -> BlockMatches:
+        """A scheduled layer's matches: the kept ones, and the model's re-matching from ``previous`` where fresh."""
+        return self._mix(x, obs, q, previous)
+
+    def _search(self, x, obs, q, previous) -> BlockMatches:
+        if previous is None:
+            return self.inner(x, obs, q)
+        return self.inner.rematch(x, obs, q, previous)
+
+    def _mix(self, x: torch.Tensor, obs: Observation, q: torch.Tensor,
+             previous: Optional[BlockMatches]) -> BlockMatches:
+        dist, index = self.previous_dist.to(x.dtype), self.previous_index
+        if bool(self.fresh.any()):
+            h, w = x.shape[-2:]
+            s = self.settings
+            window, k = s.window_and_k()[obs.task]
+            k_full = min(k, candidates_everywhere(h, w, window, s.include_self))
+            boxes = crops(self.fresh, search_radius(s, obs.task))
+            area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
+            thin = any(min(k, candidates_everywhere(r.stop - r.start, c.stop - c.start, window, s.include_self))
+                       != k_full for r, c, _, _ in boxes)
+            if area >= 0.8 * h * w or thin:  # nearly everything, or a crop too small for k candidates: whole image
+                full = slice(0, h), slice(0, w)
+                boxes = [(*full, *full)]
+            dist, index = dist.clone(), index.clone()
+            q_full = q if q.shape[-2:] == (h, w) else None
+            for rows, cols, core_r, core_c in boxes:
+                crop_obs = replace(obs, rgb=None if obs.rgb is None else obs.rgb[..., rows, cols])
+                crop_q = q_full[..., rows, cols] if q_full is not None else q
+                prev = None if previous is None else _crop_matches(previous, rows, cols, w)
+                m = self._search(x[..., rows, cols], crop_obs, crop_q, prev)
+                self.searched += (rows.stop - rows.start) * (cols.stop - cols.start)
+                wc = cols.stop - cols.start
+                inner = (slice(core_r.start - rows.start, core_r.stop - rows.start),
+                         slice(core_c.start - cols.start, core_c.stop - cols.start))
+                found = m.index[..., inner[0], inner[1]]
+                found = (found // wc + rows.start) * w + found % wc + cols.start  # back to the whole image
+                fresh = self.fresh[..., core_r, core_c]
+                dist[..., core_r, core_c] = torch.where(fresh, m.dist[..., inner[0], inner[1]].to(dist.dtype),
+                                                        dist[..., core_r, core_c])
+                index[..., core_r, core_c] = torch.where(fresh, found, index[..., core_r, core_c])
+        return finish(dist.detach(), index, self.temperature)  # the weights at the current temperature (it learns)
+
+
+def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:
+    """``mask`` (B,1,H,W) bool grown by a square of ``radius`` px."""
+    if radius <= 0:
+        return mask
+    return F.max_pool2d(mask.to(torch.float32), 2 * radius + 1, stride=1, padding=radius) > 0

@@ -1,0 +1,362 @@
+""":class:`StreamRestorer`: a depth video restored frame by frame with state carried from one frame to the next.
+
+What a frame leaves for the next (:class:`StreamState`): the restored depth; per pixel the *age* (frames of its
+static run), the *evidence* (trusted measurements of the run, decaying over holes), the mean of the run's
+measurements, whether the output had a value, the confidence, the local noise spread; the colour image and the last
+matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the three hooks of :class:`_Frame`:
+
+1. ``observe`` — the change test (:func:`~torch_depth_sr.stream.change.change_test`) splits static from changed
+   pixels (a moving object, what it uncovers, a moved camera); outliers in time are dropped where the past was
+   measured; on static pixels ``y`` becomes the mean of the run's measurements (a new mean where a measurement left
+   it); the temporal prior (``obs.temporal``: the previous estimate and the weight ``settings.weight × age`` on static
+   pixels, read by :class:`~torch_depth_sr.terms.TemporalPriorTerm` in every layer) and the matcher that keeps the
+   previous matches where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`);
+2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
+   confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
+   unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
+3. ``keep`` — the state for the next frame.
+
+A frame with no state (the first after construction or :meth:`StreamRestorer.reset`) is the per-frame model's,
+bit for bit. The state is kept without gradient (truncated back-propagation through time: a training step's
+gradient flows through the current frame only). ``docs/stream.md`` has the measurements.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, replace
+from typing import Any, NamedTuple, Optional, Union
+
+import torch
+from torch import nn
+
+from .._inputs import map_layout, parse_depth, restore_layout
+from ..config import StreamConfig
+from ..errors import ShapeError
+from ..initial import InitialEstimate
+from ..model import DepthRestorer, NoiseSigma, _check_fill, _check_model_input, _is_integer_dtype
+from ..observation import Observation
+from ..terms import TemporalPriorTerm
+from .change import change_test, local_spread
+from .matching import StreamMatcher, dilate, search_radius
+
+__all__ = ["StreamRestorer", "StreamResult", "StreamState", "TemporalPrior", "with_stream"]
+
+
+SPREAD_MEMORY = 0.9  # the decay per frame of the remembered frame-to-frame change (the change test's noise unit)
+
+
+class TemporalPrior(NamedTuple):
+    """What a stream frame knows of the previous one (``obs.temporal``), on the observation grid, in its units."""
+
+    target: torch.Tensor  # (B,1,H,W) the previous restored depth, normalised as this frame
+    weight: torch.Tensor  # (B,1,H,W) the prior's weight: settings.weight × age on static pixels, else 0
+    static: torch.Tensor  # (B,1,H,W) bool: the change test found nothing
+    evidence: torch.Tensor  # (B,1,H,W) the previous frame's evidence
+    averaged: torch.Tensor  # (B,1,H,W) bool: y is the mean of the static run's measurements here
+    restarted: torch.Tensor  # (B,1,H,W) bool: a static pixel whose measurement left the run's mean (a new mean)
+    seen: torch.Tensor  # (B,1,H,W) bool: the colour changed here (without colour: the change test)
+
+
+@dataclass
+class StreamState:
+    """What one frame leaves for the next (no gradient), in depth units."""
+
+    depth: torch.Tensor  # (B,1,H,W) the restored depth (every hole filled)
+    age: torch.Tensor  # (B,1,H,W) frames of the static run behind each pixel, at most max_frames
+    evidence: torch.Tensor  # (B,1,H,W) trusted measurements of the static run (decaying over holes)
+    mean: torch.Tensor  # (B,1,H,W) the mean of the run's measurements (0: none)
+    valid: torch.Tensor  # (B,1,H,W) bool: the output had a value (measured, or a confident fill)
+    hole: torch.Tensor  # (B,1,H,W) bool: not measured (or an outlier in time)
+    confidence: torch.Tensor  # (B,1,H,W) the model's confidence where measured, decayed on holes filled from the past
+    spread: torch.Tensor  # (B,1,H,W) local mean |y − x| of the measurements about the restored depth
+    rgb: Optional[torch.Tensor]  # (B,3,H,W) the colour image
+    matches: Optional[tuple[torch.Tensor, torch.Tensor]]  # the last layer's (dist, index), or None
+
+
+class StreamResult(NamedTuple):
+    """:meth:`StreamRestorer.step` with ``return_details=True``: :class:`~torch_depth_sr.RestorationResult`'s fields,
+    then the stream's own maps, all in the input's array type and layout.
+
+    ``confidence`` is the singular test's P at measured pixels and, on a hole filled from the past, the confidence
+    the pixel had when it was last measured times ``hole_decay`` per frame since (0 on other holes). ``static``: the
+    change test found nothing (all False on the first frame); ``evidence``: the trusted measurements behind each
+    pixel after this frame. ``info["stream"]`` holds the frame's index in the stream and the shares of static pixels,
+    reused matches and holes filled from the past."""
+
+    depth: Any
+    confidence: Any
+    trusted: Any
+    outliers: Any
+    info: dict
+    static: Any
+    evidence: Any
+
+
+def with_stream(model: DepthRestorer, settings: StreamConfig) -> DepthRestorer:
+    """``model`` with the stream's :class:`~torch_depth_sr.terms.TemporalPriorTerm` in its layers (config group
+    ``stream`` = ``settings``), sharing every parameter, buffer and stage with ``model``: training either trains
+    both. ``model`` itself is unchanged (its frames stay the per-frame model's); a model whose config already holds
+    ``settings`` is returned as it is."""
+    if model.config.stream == settings:
+        return model
+    variant = _shallow(model)
+    variant.config = model.config.replace(stream=settings)
+    layers = []
+    for layer in model.layers:
+        lv = _shallow(layer)
+        terms = _shallow(layer.terms)
+        own = [t for t in layer.terms["denoise"] if not isinstance(t, TemporalPriorTerm)]
+        terms["denoise"] = nn.ModuleList([*own, TemporalPriorTerm(settings)])
+        lv.terms = terms
+        layers.append(lv)
+    variant.layers = nn.ModuleList(layers)
+    return variant
+
+
+def _shallow(module: nn.Module) -> nn.Module:
+    """A new module object sharing ``module``'s submodules, parameters and buffers (its own registries)."""
+    out = copy.copy(module)
+    for name in ("_modules", "_parameters", "_buffers"):
+        object.__setattr__(out, name, dict(getattr(module, name)))
+    return out
+
+
+def _stream_settings(model: DepthRestorer, settings: Union[StreamConfig, dict, None]) -> StreamConfig:
+    base = model.config.stream or StreamConfig()
+    if settings is None:
+        return base
+    if isinstance(settings, dict):
+        return base.replace(**settings)
+    if not isinstance(settings, StreamConfig):
+        from ..errors import ParameterError
+
+        raise ParameterError("settings", settings, "a StreamConfig, a dict of its fields or None")
+    return settings
+
+
+class _Frame:
+    """The stream hooks of :meth:`DepthRestorer._run` for one frame: the previous frame into the observation and
+    the initial stage, this frame kept for the next (:attr:`kept`)."""
+
+    def __init__(self, settings: StreamConfig, state: Optional[StreamState]):
+        self.settings, self.state = settings, state
+        self.kept: Optional[StreamState] = None
+        self.valid: Optional[torch.Tensor] = None
+        self.stats: dict = {}
+        self.static: Optional[torch.Tensor] = None
+
+    def observe(self, obs: Observation) -> Observation:
+        s, st = self.settings, self.state
+        if st is None or obs.task != "denoise":
+            return obs
+        if st.depth.shape != obs.y.shape:
+            raise ShapeError(f"this frame is {tuple(obs.y.shape)} but the stream's previous frame was "
+                             f"{tuple(st.depth.shape)}; call reset() before a stream of another size or batch.",
+                             actual=tuple(obs.y.shape), expected=tuple(st.depth.shape))
+        dt = obs.y.dtype
+        target = obs.normalise(st.depth.to(dt))
+        scale = obs.scale.to(dt).view(-1, 1, 1, 1)
+        floor = torch.maximum(0.25 * obs.noise, obs.grid_step).to(dt).view(-1, 1, 1, 1)
+        noise = torch.maximum(st.spread.to(dt) / scale, floor)
+        test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s)
+        static = ~test.changed
+        if obs.rgb is not None and st.rgb is not None:  # a hole has no depth to test: its own colour must not change
+            own = (obs.rgb - st.rgb.to(obs.rgb)).abs().mean(1, keepdim=True) > s.color_test
+            static = static & ~(own & (obs.observed <= 0))
+        evidence = st.evidence.to(dt)
+        # an outlier in time where the past was measured confidently: taken as missing (held at the past)
+        outlier = test.outlier & (evidence >= s.fill_evidence)
+        self.stats["outliers_in_time"] = float(outlier.float().mean())
+        if bool(outlier.any()):
+            obs = replace(obs, observed=torch.where(outlier, torch.zeros_like(obs.observed), obs.observed),
+                          y=torch.where(outlier, torch.zeros_like(obs.y), obs.y), glitches=obs.glitches | outlier)
+        # the measurement of a static pixel joins the mean of its run (the model sees the mean: every stage that
+        # reads y, the data term and the do-no-harm band included); a measurement that left the mean by more than
+        # outlier_test noise levels (an edge settling, a step of the sensor) starts a new mean
+        measured = obs.observed > 0
+        mean = obs.normalise(st.mean.to(dt))
+        had = (st.mean > 0) & (evidence > 0)
+        restarted = static & measured & had & ((obs.y - mean).abs() > (s.outlier_test or math.inf) * noise)
+        averaged = static & measured & had & ~restarted
+        y = torch.where(averaged, (obs.y + evidence * mean) / (evidence + 1), obs.y)
+        obs = replace(obs, y=y)
+        # a hole the past did not measure confidently: its fill is the frame's own, damped over a few frames only
+        age = st.age.to(dt)
+        unmeasured = ~measured & (evidence < s.fill_evidence)
+        age = torch.where(unmeasured, age.clamp(max=s.unmeasured_frames), age)
+        weight = torch.where(static, s.weight * age, torch.zeros_like(evidence))
+        self.static = static
+        obs = replace(obs, temporal=TemporalPrior(target, weight, static, evidence, averaged, restarted, test.seen))
+        if s.reuse_matches and st.matches is not None:
+            fresh = dilate(test.changed, search_radius(obs.block_matcher.settings, obs.task))
+            obs = replace(obs, block_matcher=StreamMatcher(obs.block_matcher, st.matches, fresh))
+            self.stats["reused_matches"] = float((~fresh).float().mean())
+        return obs
+
+    def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
+        initial = init(obs)
+        prior = obs.temporal
+        hole = obs.observed <= 0
+        if prior is None:
+            self.valid = ~hole | (initial.fill_confident > 0)
+            return initial
+        # a hole the past measured confidently is filled from the past; a hole that was one in the previous frame
+        # too keeps that frame's verdict (filled, or left missing with fill="trusted") unless its colour changed: no
+        # pixel toggles between filled and missing on noise; any other hole gets the frame's own verdict
+        past = self._from_past(obs)
+        held = hole & self.state.hole.to(hole.device) & ~prior.seen
+        confident = torch.where(past, torch.ones_like(initial.fill_confident),
+                                torch.where(held, self.state.valid.to(initial.fill_confident), initial.fill_confident))
+        self.valid = ~hole | (confident > 0)
+        return initial._replace(fill_confident=confident)
+
+    def _from_past(self, obs: Observation) -> torch.Tensor:
+        """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""
+        prior = obs.temporal
+        return (obs.observed <= 0) & prior.static & (prior.evidence >= self.settings.fill_evidence)
+
+    def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
+        s = self.settings
+        if obs.task != "denoise":
+            self.kept = None
+            return
+        with torch.no_grad():
+            x = x.detach()
+            measured = obs.observed > 0
+            trusted = measured & (state.q.detach() > 0)
+            one = trusted.to(x.dtype)
+            conf = (state.confidence.detach() * obs.observed).to(x.dtype)
+            ymean = torch.where(measured, obs.denormalise(obs.y.detach()), torch.zeros_like(x))
+            prior = obs.temporal
+            if prior is None:
+                age, evidence, confidence, mean = torch.ones_like(one), one, conf, ymean
+            else:
+                static, st = prior.static, self.state
+                age = torch.where(static, torch.clamp(st.age.to(x.dtype) + 1, max=s.max_frames),
+                                  torch.ones_like(one))
+                grown = torch.clamp(prior.evidence + 1, max=s.max_frames)
+                held = torch.where(measured, prior.evidence, prior.evidence * s.hole_decay)
+                run = static & ~prior.restarted
+                evidence = torch.where(run, torch.where(trusted, grown, held), one)
+                past_conf = st.confidence.to(x.dtype) * s.hole_decay
+                confidence = torch.where(measured, conf, torch.where(static, past_conf, torch.zeros_like(conf)))
+                mean = torch.where(measured, ymean, torch.where(static, st.mean.to(x.dtype), torch.zeros_like(x)))
+                self.stats["filled_from_past"] = float(self._from_past(obs).float().mean())
+                self.stats["static"] = float(static.float().mean())
+            matches = None
+            if state.matches is not None:
+                matches = (state.matches.dist.detach(), state.matches.index.detach())
+            rgb = None if obs.rgb is None else obs.rgb.detach()
+            # the noise unit of the next change test: the local spread of the measurements about this estimate, and
+            # where the scene stayed, of their change since the previous estimate (a sensor whose depth steps
+            # between levels, far away, moves more from frame to frame than about any one estimate), remembered
+            # with a decay of SPREAD_MEMORY per frame
+            spread = local_spread(obs.raw, obs.observed, x, 2 * s.window + 1)
+            if prior is not None:
+                innovation = local_spread(obs.raw, obs.observed, self.state.depth.to(x.dtype), 2 * s.window + 1)
+                remembered = torch.maximum(innovation, SPREAD_MEMORY * self.state.spread.to(x.dtype))
+                spread = torch.where(prior.static, torch.maximum(spread, remembered), spread)
+            self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
+                                    confidence=confidence, spread=spread, rgb=rgb, matches=matches)
+
+
+class StreamRestorer(nn.Module):
+    """A depth video restored frame by frame, each frame helped by the previous one (module docstring).
+
+    Args:
+        model: the :class:`~torch_depth_sr.DepthRestorer` to run (``from_pretrained``, ``from_preset``, trained or
+            frozen); default ``DepthRestorer()``, what :func:`~torch_depth_sr.restore_depth` runs. The stream shares
+            its parameters (:func:`with_stream`): training the stream trains ``model``.
+        settings: the stream's settings (:class:`~torch_depth_sr.config.StreamConfig`, a dict of changes, or None:
+            ``model.config.stream``, else the defaults).
+        fill: ``"all"`` or ``"trusted"`` as in :func:`~torch_depth_sr.restore_depth`; with ``"trusted"`` a hole
+            filled from the past counts as confident.
+        noise_sigma: the noise std in depth units (None: estimated per frame).
+
+    :meth:`step` takes and returns what :func:`~torch_depth_sr.restore_depth` does (numpy or torch, ``(H,W)``,
+    ``(1,H,W)`` or ``(B,1,H,W)``, any dtype and unit, 0/NaN holes); a batch is B independent streams. As a module,
+    ``stream(depth, rgb)`` is :meth:`DepthRestorer.forward` with the state (``(B,1,H,W)`` float tensors,
+    differentiable).
+    :meth:`reset` starts a new stream. ``stateful`` tells :func:`~torch_depth_sr.recordings.restore_dataset` to replay
+    a sequence from its start on resume.
+
+    Examples:
+        >>> from torch_depth_sr.datasets.synthetic import make_scene
+        >>> s = make_scene(32, 40, seed=0)
+        >>> stream = StreamRestorer(DepthRestorer(num_layers=2))
+        >>> frames = [s["gt"] + torch.randn_like(s["gt"]) for _ in range(3)]
+        >>> outs = [stream.step(f, s["rgb"]) for f in frames]
+        >>> outs[-1].shape
+        torch.Size([1, 32, 40])
+    """
+
+    stateful = True
+
+    def __init__(self, model: Optional[DepthRestorer] = None, settings: Union[StreamConfig, dict, None] = None, *,
+                 fill: str = "all", noise_sigma: NoiseSigma = None):
+        super().__init__()
+        model = DepthRestorer() if model is None else model
+        _check_fill(fill)
+        self.settings = _stream_settings(model, settings)
+        self.model = with_stream(model, self.settings)
+        self.fill, self.noise_sigma = fill, noise_sigma
+        self.state: Optional[StreamState] = None
+        self.frames = 0  # frames since the last reset
+
+    def reset(self) -> None:
+        """Forget the previous frames: the next frame is restored on its own."""
+        self.state = None
+        self.frames = 0
+
+    def step(self, depth: Any, rgb: Any = None, mask: Any = None, *, return_details: bool = False,
+             fill: Optional[str] = None, noise_sigma: NoiseSigma = None, scale_factor: Optional[int] = None,
+             timings: bool = False) -> Any:
+        """Restore the next frame: ``depth``, ``rgb``, ``mask`` as :func:`~torch_depth_sr.restore_depth` takes them;
+        returns the restored depth in the input's type, layout, dtype and units, or a :class:`StreamResult` with
+        ``return_details=True``. ``fill`` and ``noise_sigma`` override the stream's for this frame."""
+        fill = self.fill if fill is None else fill
+        _check_fill(fill)
+        dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
+        y, observed, layout = parse_depth(depth, mask, dtype)
+        out, frame = self._step(y, observed, rgb, noise_sigma, scale_factor, fill, bool(timings) and return_details,
+                                _is_integer_dtype(layout.dtype))
+        x = restore_layout(out.depth, layout)
+        if not return_details:
+            return x
+        maps = {k: map_layout(v, layout) for k, v in self._maps(out, frame).items()}
+        return StreamResult(depth=x, info=out.info, **maps)
+
+    def forward(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None, mask: Optional[torch.Tensor] = None,
+                noise_sigma: NoiseSigma = None, fill: Optional[str] = None) -> torch.Tensor:
+        """The next frame of ``(B,1,H,W)`` float depth guided by ``rgb (B,3,H,W)`` in [0,1], as
+        :meth:`DepthRestorer.forward` returns it (differentiable in the model's parameters)."""
+        fill = self.fill if fill is None else fill
+        _check_fill(fill)
+        _check_model_input(depth, rgb, mask)
+        dtype = torch.float64 if depth.dtype == torch.float64 else torch.float32
+        y, observed, _ = parse_depth(depth, mask, dtype)
+        out, _ = self._step(y, observed, rgb, noise_sigma, None, fill, False, False)
+        return out.depth.to(device=depth.device, dtype=depth.dtype)
+
+    def _step(self, y, observed, rgb, noise_sigma, scale_factor, fill, timed, integer_input):
+        frame = _Frame(self.settings, self.state)
+        sigma = self.noise_sigma if noise_sigma is None else noise_sigma
+        out = self.model._run(y, observed, rgb, sigma, scale_factor, fill, timed=timed, integer_input=integer_input,
+                              stream=frame)
+        self.state = frame.kept
+        out.info["stream"] = {"frame": self.frames, **frame.stats}
+        self.frames += 1
+        return out, frame
+
+    def _maps(self, out, frame: _Frame) -> dict:
+        kept = frame.kept
+        conf = out.confidence if kept is None else kept.confidence.to(out.confidence)
+        static = torch.zeros_like(out.trusted, dtype=torch.bool) if frame.static is None else frame.static
+        evidence = torch.zeros_like(out.trusted) if kept is None else kept.evidence.to(out.trusted)
+        dev = out.trusted.device
+        return {"confidence": conf.to(dev), "trusted": out.trusted, "outliers": out.outliers,
+                "static": static.to(dev).to(out.trusted.dtype), "evidence": evidence.to(dev)}
+
+    def extra_repr(self) -> str:
+        return ", ".join(f"{k}={v}" for k, v in self.settings.to_dict().items()) + f", fill={self.fill!r}"
