@@ -87,23 +87,12 @@ def parse_depth(depth: Any, mask: Any = None, compute_dtype: torch.dtype = torch
         raise ShapeError(f"depth is empty: shape {tuple(t.shape)}.", actual=tuple(t.shape),
                          expected="B, H, W >= 1")
     y = t.to(compute_dtype)
-    finite_or_nan = torch.isfinite(y) | torch.isnan(y)
-    if not bool(finite_or_nan.all()):
-        raise InvalidDepthError("depth contains +/-inf; allowed are finite values, with 0 or NaN for "
-                                "'no measurement'. Replace inf by NaN (e.g. PFM files mark unknown with inf).")
-    if bool((y < 0).any()):
-        raise InvalidDepthError(f"depth contains negative values (min {float(torch.nan_to_num(y).min()):g}); "
-                                "allowed are depth/disparity >= 0 with 0 or NaN meaning 'no measurement'.")
     observed = torch.isfinite(y) & (y > 0)
-    _check_some_measured(observed, "depth sample(s) {bad} have no measured pixel (all 0 or NaN); at least one "
-                                   "pixel > 0 is needed to restore a depth map.")
-    if mask is not None:
-        m = _parse_mask(mask, y.shape, tuple(t.shape if ndim == 4 else depth.shape))
-        _check_some_measured(m.to(y.device), "mask marks no pixel of sample(s) {bad} as measured (all 0 or False); "
-                                             "values > 0 mean measured. Pass mask=None to use depth > 0 alone.")
-        observed = observed & m.to(y.device)
-        _check_some_measured(observed, "mask and depth share no measured pixel in sample(s) {bad}: where the mask is "
-                                       "nonzero the depth is 0 or NaN. Check that they belong together.")
+    m = None if mask is None else _parse_mask(mask, y.shape, tuple(t.shape if ndim == 4 else depth.shape)).to(y.device)
+    if _values_readable(y):
+        _check_depth_values(y, observed, m)
+    if m is not None:
+        observed = observed & m
     y = torch.where(observed, y, torch.zeros_like(y))
     layout = DepthLayout(was_numpy=was_numpy, ndim=ndim, dtype=orig_dtype, device=t.device)
     return y, observed.to(compute_dtype), layout
@@ -121,10 +110,36 @@ def _parse_mask(mask: Any, shape: torch.Size, depth_shape: tuple) -> torch.Tenso
     return m.reshape(shape) > 0
 
 
-def _check_some_measured(observed: torch.Tensor, message: str) -> None:
-    counts = observed.flatten(1).sum(1)
-    if bool((counts == 0).any()):
-        raise InvalidDepthError(message.format(bad=torch.nonzero(counts == 0).flatten().tolist()))
+def _values_readable(t: torch.Tensor) -> bool:
+    """Whether the input's values can be checked: not while a CUDA graph is being captured (reading a value there
+    fails; the caller checks its inputs before capturing, and a replay checks nothing)."""
+    return not (t.is_cuda and torch.cuda.is_current_stream_capturing())
+
+
+def _check_depth_values(y: torch.Tensor, observed: torch.Tensor, mask: Any) -> None:
+    """Refuse ±inf, negative values and a sample without a measured pixel (in depth, in the mask, in both), in that
+    order. One read of the values on the host (on a GPU, the one wait of the depth input for the device)."""
+    empty = [observed.flatten(1).sum(1) == 0]
+    if mask is not None:
+        empty += [mask.flatten(1).sum(1) == 0, (observed & mask).flatten(1).sum(1) == 0]
+    has_inf, negative, *flags = torch.cat([torch.stack([torch.isinf(y).any(), (y < 0).any()])] + empty).tolist()
+    if has_inf:
+        raise InvalidDepthError("depth contains +/-inf; allowed are finite values, with 0 or NaN for "
+                                "'no measurement'. Replace inf by NaN (e.g. PFM files mark unknown with inf).")
+    if negative:
+        raise InvalidDepthError(f"depth contains negative values (min {float(torch.nan_to_num(y).min()):g}); "
+                                "allowed are depth/disparity >= 0 with 0 or NaN meaning 'no measurement'.")
+    messages = ["depth sample(s) {bad} have no measured pixel (all 0 or NaN); at least one pixel > 0 is needed to "
+                "restore a depth map.",
+                "mask marks no pixel of sample(s) {bad} as measured (all 0 or False); values > 0 mean measured. "
+                "Pass mask=None to use depth > 0 alone.",
+                "mask and depth share no measured pixel in sample(s) {bad}: where the mask is nonzero the depth is 0 "
+                "or NaN. Check that they belong together."]
+    n = y.shape[0]
+    for i, message in enumerate(messages[:len(empty)]):
+        bad = [j for j, e in enumerate(flags[i * n:(i + 1) * n]) if e]
+        if bad:
+            raise InvalidDepthError(message.format(bad=bad))
 
 
 def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
@@ -147,7 +162,8 @@ def parse_rgb(rgb: Any, batch: int, device: torch.device, dtype: torch.dtype) ->
         raise ShapeError(f"rgb must be (B,3,H,W), (3,H,W), H×W×3 (numpy) or greyscale; got {tuple(rgb.shape)}.",
                          actual=tuple(rgb.shape), expected="(B,3,H,W), (3,H,W), H×W×3 or greyscale")
     t = t.to(device=device, dtype=dtype)
-    _check_rgb_range(t.detach(), is_int, full_scale, rgb.dtype)  # detached: the checks read values only
+    if _values_readable(t):
+        _check_rgb_range(t.detach(), is_int, full_scale, rgb.dtype)  # detached: the checks read values only
     if is_int:
         t = t / full_scale
     if t.shape[1] == 1:
@@ -168,9 +184,10 @@ def _integer_full_scale(rgb: Any) -> float:
 
 
 def _check_rgb_range(t: torch.Tensor, is_int: bool, full_scale: float, orig_dtype: Any) -> None:
-    if not bool(torch.isfinite(t).all()):
+    """Refuse non-finite colour and colour outside its range; one read of the values on the host."""
+    finite, lo, hi = torch.stack([torch.isfinite(t).all().to(t.dtype), t.min(), t.max()]).tolist()
+    if not finite:
         raise DTypeError("rgb contains NaN or inf; allowed are finite values in [0,1] (float) or 0..255 (uint8).")
-    lo, hi = float(t.min()), float(t.max())
     if is_int and (lo < 0 or hi > full_scale):
         raise DTypeError(f"integer rgb of dtype {orig_dtype} is read as {'16' if full_scale > 255 else '8'}-bit "
                          f"(0..{full_scale:g}); got values in [{lo:g}, {hi:g}]. Pass 8-bit colour as uint8, "

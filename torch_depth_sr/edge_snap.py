@@ -19,6 +19,7 @@ import torch
 import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
+from .native import host_path
 
 __all__ = ["refit_to_measurements", "sided_median", "snap_to_sides"]
 
@@ -142,7 +143,7 @@ def _no_sample_active(active: Optional[torch.Tensor], x: torch.Tensor) -> bool:
     """Whether a per-sample ``active`` (B,1,1,1) says that no sample may change, checked on the CPU only: there
     reading it costs nothing, while on a GPU it would make the host wait for the device (the step then runs and
     changes nothing)."""
-    if active is None or x.device.type != "cpu" or active.shape[-2:] != (1, 1):
+    if active is None or not host_path(x.device) or active.shape[-2:] != (1, 1):
         return False
     return not bool(active.any())
 
@@ -150,7 +151,7 @@ def _no_sample_active(active: Optional[torch.Tensor], x: torch.Tensor) -> bool:
 def _some_samples_active(active: Optional[torch.Tensor], x: torch.Tensor) -> Optional[torch.Tensor]:
     """The indices of the active samples when a per-sample ``active`` leaves some out (CPU only, as above), else
     None."""
-    if active is None or x.device.type != "cpu" or active.shape[-2:] != (1, 1) or active.shape[0] != x.shape[0]:
+    if active is None or not host_path(x.device) or active.shape[-2:] != (1, 1) or active.shape[0] != x.shape[0]:
         return None
     a = active.reshape(-1)
     return None if bool(a.all()) else a.nonzero()[:, 0]
@@ -185,10 +186,12 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     near_edge = (F.max_pool2d(x, 5, 1, 2) + F.max_pool2d(-x, 5, 1, 2)) > edge
     if active is not None:
         near_edge = near_edge & active
-    # the pixels near an edge, (N, 4): sample, channel, row, column; one host synchronisation on a GPU (the
-    # layers are done: it costs no overlap), for a gather over 2–5 % of the pixels instead of a sort over all
-    where = near_edge.nonzero()
-    if where.shape[0] == 0:
+    cpu = host_path(x.device)
+    # the pixels near an edge, (N, 4): sample, channel, row, column; on the CPU a gather over 2–5 % of the pixels
+    # instead of a sort over all. Other devices take every pixel (finding them would make the host wait for the
+    # device) and keep the result near an edge only: the same values.
+    where = near_edge.nonzero() if cpu else None
+    if cpu and where.shape[0] == 0:
         return x
     yp = F.pad(torch.where(observed > 0, y, torch.zeros_like(y)), (r, r, r, r)).reshape(-1)
     op = F.pad((observed > 0).to(x.dtype), (r, r, r, r)).reshape(-1)
@@ -200,8 +203,11 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     offsets = torch.tensor([dy * wp + dx for dy in range(-r, r + 1) for dx in range(-r, r + 1)], device=x.device)
     out = x.clone(memory_format=torch.contiguous_format)
     flat_out, flat_x = out.view(-1), x.reshape(-1)
-    for start in range(0, where.shape[0], _PIXELS_PER_CHUNK):
-        bi, _, ri, ci = where[start:start + _PIXELS_PER_CHUNK].unbind(1)
+    pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3] if cpu else torch.arange(b * h * w, device=x.device)
+    flat_near = near_edge.expand(b, 1, h, w).reshape(-1)
+    for start in range(0, pixels.shape[0], _PIXELS_PER_CHUNK):
+        flat = pixels[start:start + _PIXELS_PER_CHUNK]
+        bi, ri, ci = flat // (h * w), flat // w % h, flat % w
         centre_index = (bi * hp + ri + r) * wp + ci + r  # (n,) in the padded frame
         window = centre_index[:, None] + offsets[None, :]  # (n, window)
         values, votes = yp[window], op[window]
@@ -210,5 +216,6 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
         distance = (colour_rows[window] - colour_rows[centre_index][:, None, :]).abs().sum(-1)  # (n, window)
         weight = _colour_weight(distance, sigma_color) * votes * ((values - centre).abs() <= band)
         median, total = _weighted_median(values, weight)
-        flat_out[out_index] = torch.where(total > 1.0, median, centre[:, 0])
+        new = torch.where(total > 1.0, median, centre[:, 0])
+        flat_out[out_index] = new if cpu else torch.where(flat_near[out_index], new, centre[:, 0])
     return out

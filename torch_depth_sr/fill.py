@@ -13,6 +13,7 @@ import torch
 import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
+from .native import host_path
 
 __all__ = ["fill_holes", "pull_push", "SidedFill", "fill_holes_sided"]
 
@@ -73,7 +74,12 @@ def _push_pull(weighted: torch.Tensor, weight: torch.Tensor, upsample: str) -> t
     """Recursive push-pull on (sum of weighted values, sum of weights)."""
     h, w = weighted.shape[-2:]
     estimate = weighted / weight.clamp_min(1e-12)
-    if bool((weight > 0).all()) or (h <= 1 and w <= 1):
+    if h <= 1 and w <= 1:
+        return estimate
+    # the CPU stops at the first level where every pixel has weight; other devices go on to 1×1 (asking would make
+    # the host wait for the device) and keep this level's estimate where it has weight: the same values
+    cpu = host_path(weighted.device)
+    if cpu and bool((weight > 0).all()):
         return estimate
     # push: 2x2 sums (ceil mode keeps the last odd row/column)
     coarse_weighted = F.avg_pool2d(weighted, 2, ceil_mode=True) * 4  # (B,C,ceil(H/2),ceil(W/2))
@@ -84,6 +90,8 @@ def _push_pull(weighted: torch.Tensor, weight: torch.Tensor, upsample: str) -> t
         up = F.interpolate(coarse, size=(h, w), mode="bilinear", align_corners=False)
     else:
         up = F.interpolate(coarse, size=(h, w), mode="nearest")
+    if not cpu:
+        return torch.where(weight > 0, estimate, up)
     has = (weight > 0).to(estimate.dtype)
     return has * estimate + (1 - has) * up
 
@@ -172,65 +180,20 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
     # (one index tensor instead of four: the same values, several times faster than multi-dimensional indexing)
     guide_rows = None if guide is None else guide.expand(b, -1, h, w).permute(0, 2, 3, 1).reshape(b * h * w, -1)
     allow_weak = guide is None
+    planes = _FillPlanes(x, conf, filled, guide_rows, ws, wch, dy, dx, h, w, sigma_color, quantiles, gap, min_share)
+    if not host_path(depth.device):
+        return _fill_every_pixel(planes, gapped, shares, passes, allow_weak)
     for _ in range(max(1, passes) + 1):
         todo = ~filled
         if not bool(todo.any()):
             break
         bi, _, yi, xi = torch.nonzero(todo, as_tuple=True)  # (N,)
-        yy = (yi[:, None] + dy[None]).clamp(-1, h)  # (N, K²); -1 / h = outside
-        xx = (xi[:, None] + dx[None]).clamp(-1, w)
-        inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
-        yc, xc = yy.clamp(0, h - 1), xx.clamp(0, w - 1)
-        flat = (bi[:, None] * h + yc) * w + xc  # (N, K²) flat index of each window pixel in (B, 1, H, W)
-        v = x.reshape(-1)[flat]  # (N, K²)
-        m = (filled.reshape(-1)[flat] & inside).to(dt)
-        c = conf.reshape(-1)[flat]
-        wgt = ws[None] * m
-        wc = torch.ones_like(m)
-        if guide is not None:
-            centre = guide_rows[(bi * h + yi) * w + xi]  # (N, 3)
-            d2 = (guide_rows[flat] - centre[:, None, :]).pow(2).sum(-1)  # (N, K², 3) -> (N, K²)
-            wc = torch.exp(-d2 / (2 * sigma_color ** 2))
-            wgt = wgt * wc
-        has = m.sum(1) > 0
-        wsum = wgt.sum(1)
-        # pixels none of whose measured neighbours has a similar colour wait for the propagation from the side
-        # they match; only when a pass fills nothing else are they filled by nearness (space weights) alone
-        weak = (wc * m).amax(1) < _MATCH if guide is not None else torch.zeros_like(has)
-        wgt = torch.where(weak[:, None], ws[None] * m, wgt)
-        # spread of the measured values
-        vn = torch.where(m > 0, v, torch.full_like(v, float("nan")))
-        lo, hi = _nanquantiles(vn, quantiles)
-        spans = has & (hi - lo > gap)
-        # 2-means seeded at the quantiles
-        ca, cb = lo, hi
-        for _it in range(2):
-            mid = 0.5 * (ca + cb)
-            in_b = (v > mid[:, None]) & (m > 0)
-            in_a = (v <= mid[:, None]) & (m > 0)
-            ca = _masked_mean(v, in_a, ca)
-            cb = _masked_mean(v, in_b, cb)
-        third = (cb - ca) / 3
-        side_a = in_a & (v <= (ca + third)[:, None])
-        side_b = in_b & (v >= (cb - third)[:, None])
-        wchoice = wch[None] * m * wc
-        wchoice = torch.where(weak[:, None], wch[None] * m, wchoice)
-        wa = (wchoice * side_a).sum(1)
-        wb = (wchoice * side_b).sum(1)
-        pick_b = wb > wa
-        side = torch.where(pick_b[:, None], side_b, side_a)
-        share = torch.maximum(wa, wb) / (wa + wb).clamp_min(1e-30)
-        use = torch.where(spans[:, None], side.to(dt), torch.ones_like(m)) * wgt
-        den = use.sum(1)
-        est = (use * v).sum(1) / den.clamp_min(1e-30)
-        ok = has & (den > 0)
+        est, c_new, spans, share, ok, weak = _fill_pixels(planes, bi, yi, xi)
         if not allow_weak:
             if not bool((ok & ~weak).any()):
                 allow_weak = True
                 continue
             ok = ok & ~weak
-        c_in = (use * c).sum(1) / den.clamp_min(1e-30)  # confidence of what the value came from
-        c_new = torch.where(spans, (share >= min_share).to(dt), torch.ones_like(share)) * (c_in > 0.5).to(dt)
         bi, yi, xi = bi[ok], yi[ok], xi[ok]
         x[bi, 0, yi, xi] = est[ok]
         conf[bi, 0, yi, xi] = c_new[ok]
@@ -241,6 +204,116 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
         rest = fill_holes(x, filled.to(dt))
         x = torch.where(filled, x, rest)
     return SidedFill(x, conf, gapped, shares)
+
+
+class _FillPlanes(NamedTuple):
+    """What every pass of :func:`fill_holes_sided` reads: the planes it fills in place (``x``, ``conf``, ``filled``)
+    and the fixed settings."""
+
+    x: torch.Tensor
+    conf: torch.Tensor
+    filled: torch.Tensor
+    guide_rows: Optional[torch.Tensor]
+    ws: torch.Tensor
+    wch: torch.Tensor
+    dy: torch.Tensor
+    dx: torch.Tensor
+    h: int
+    w: int
+    sigma_color: float
+    quantiles: tuple
+    gap: float
+    min_share: float
+
+
+def _fill_pixels(p: _FillPlanes, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> tuple:
+    """One pass's values at the pixels ``(bi, yi, xi)`` (N,) from their windows: ``(estimate, confidence, spans a
+    gap, side share, has a value, weak)``, each (N,). Each pixel's values depend on its window only."""
+    h, w, dt = p.h, p.w, p.x.dtype
+    yy = (yi[:, None] + p.dy[None]).clamp(-1, h)  # (N, K²); -1 / h = outside
+    xx = (xi[:, None] + p.dx[None]).clamp(-1, w)
+    inside = (yy >= 0) & (yy < h) & (xx >= 0) & (xx < w)
+    yc, xc = yy.clamp(0, h - 1), xx.clamp(0, w - 1)
+    flat = (bi[:, None] * h + yc) * w + xc  # (N, K²) flat index of each window pixel in (B, 1, H, W)
+    v = p.x.reshape(-1)[flat]  # (N, K²)
+    m = (p.filled.reshape(-1)[flat] & inside).to(dt)
+    c = p.conf.reshape(-1)[flat]
+    wgt = p.ws[None] * m
+    wc = torch.ones_like(m)
+    if p.guide_rows is not None:
+        centre = p.guide_rows[(bi * h + yi) * w + xi]  # (N, 3)
+        d2 = (p.guide_rows[flat] - centre[:, None, :]).pow(2).sum(-1)  # (N, K², 3) -> (N, K²)
+        wc = torch.exp(-d2 / (2 * p.sigma_color ** 2))
+        wgt = wgt * wc
+    has = m.sum(1) > 0
+    # pixels none of whose measured neighbours has a similar colour wait for the propagation from the side
+    # they match; only when a pass fills nothing else are they filled by nearness (space weights) alone
+    weak = (wc * m).amax(1) < _MATCH if p.guide_rows is not None else torch.zeros_like(has)
+    wgt = torch.where(weak[:, None], p.ws[None] * m, wgt)
+    # spread of the measured values
+    vn = torch.where(m > 0, v, torch.full_like(v, float("nan")))
+    lo, hi = _nanquantiles(vn, p.quantiles)
+    spans = has & (hi - lo > p.gap)
+    # 2-means seeded at the quantiles
+    ca, cb = lo, hi
+    for _it in range(2):
+        mid = 0.5 * (ca + cb)
+        in_b = (v > mid[:, None]) & (m > 0)
+        in_a = (v <= mid[:, None]) & (m > 0)
+        ca = _masked_mean(v, in_a, ca)
+        cb = _masked_mean(v, in_b, cb)
+    third = (cb - ca) / 3
+    side_a = in_a & (v <= (ca + third)[:, None])
+    side_b = in_b & (v >= (cb - third)[:, None])
+    wchoice = p.wch[None] * m * wc
+    wchoice = torch.where(weak[:, None], p.wch[None] * m, wchoice)
+    wa = (wchoice * side_a).sum(1)
+    wb = (wchoice * side_b).sum(1)
+    pick_b = wb > wa
+    side = torch.where(pick_b[:, None], side_b, side_a)
+    share = torch.maximum(wa, wb) / (wa + wb).clamp_min(1e-30)
+    use = torch.where(spans[:, None], side.to(dt), torch.ones_like(m)) * wgt
+    den = use.sum(1)
+    est = (use * v).sum(1) / den.clamp_min(1e-30)
+    ok = has & (den > 0)
+    c_in = (use * c).sum(1) / den.clamp_min(1e-30)  # confidence of what the value came from
+    c_new = torch.where(spans, (share >= p.min_share).to(dt), torch.ones_like(share)) * (c_in > 0.5).to(dt)
+    return est, c_new, spans, share, ok, weak
+
+
+_FILL_CHUNK = 1 << 16  # pixels per window gather off the CPU: 65536 × 121 × 3 × 4 bytes ≈ 95 MB for the colour
+
+
+def _fill_every_pixel(p: _FillPlanes, gapped: torch.Tensor, shares: torch.Tensor, passes: int,
+                      allow_weak: bool) -> SidedFill:
+    """:func:`fill_holes_sided`'s passes without reading a value on the host (any device): every pixel is computed
+    (in chunks of the same size whatever the holes) and the holes' results are kept, so the pixels filled and
+    their values are those of the CPU path, which computes the holes only. A pass with nothing to fill changes
+    nothing; the switch to weak pixels (when a pass fills nothing else) is a flag on the device."""
+    b, dt = p.x.shape[0], p.x.dtype
+    n = b * p.h * p.w
+    pixel = torch.arange(n, device=p.x.device)
+    bi, yi, xi = pixel // (p.h * p.w), pixel // p.w % p.h, pixel % p.w
+    x, conf, filled = p.x.reshape(-1), p.conf.reshape(-1), p.filled.reshape(-1)
+    gapped, shares = gapped.reshape(-1), shares.reshape(-1)
+    weak_allowed = torch.tensor(allow_weak, device=p.x.device)
+    for _ in range(max(1, passes) + 1):
+        parts = [_fill_pixels(p, bi[i:i + _FILL_CHUNK], yi[i:i + _FILL_CHUNK], xi[i:i + _FILL_CHUNK])
+                 for i in range(0, n, _FILL_CHUNK)]
+        est, c_new, spans, share, ok, weak = (torch.cat(t) for t in zip(*parts))
+        ok = ok & ~filled
+        stalled = ~weak_allowed & ~(ok & ~weak).any()  # the CPU's "continue": nothing written, weak pixels next
+        ok = ok & ~stalled & (weak_allowed | ~weak)
+        weak_allowed = weak_allowed | stalled
+        x = torch.where(ok, est, x)
+        conf = torch.where(ok, c_new, conf)
+        gapped = torch.where(ok, spans.to(dt), gapped)
+        shares = torch.where(ok & spans, share, torch.where(ok, torch.ones_like(share), shares))
+        filled = filled | ok
+        p = p._replace(x=x.view_as(p.x), conf=conf.view_as(p.conf), filled=filled.view_as(p.filled))
+    x, filled = p.x, p.filled
+    x = torch.where(filled, x, fill_holes(x, filled.to(dt)))
+    return SidedFill(x, p.conf, gapped.view_as(x), shares.view_as(x))
 
 
 _MATCH = 1e-3  # colour weight above which a neighbour "looks like" the pixel (distance < 3.7 sigma_color)

@@ -28,6 +28,7 @@ import torch.nn.functional as F
 from ._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw, check_same_shape
 from .errors import DepthSRError, ShapeError
 from .fill import pull_push
+from .native import host_path
 
 __all__ = ["domain_transform_filter", "joint_bilateral_filter", "joint_bilateral_upsample", "limited_slopes"]
 
@@ -64,9 +65,17 @@ def _per_sample(value: float | torch.Tensor, batch: int, ref: torch.Tensor, name
     check_per_sample(t, name, batch)
     if t.ndim == 0:
         t = t.expand(batch)
-    if not bool((t > 0).all()):
+    if not _positive(value, t):
         raise DepthSRError(f"{name} must be positive; got {t.tolist()}.")
     return t.expand(batch).reshape(batch, 1, 1, 1)
+
+
+def _positive(value: float | torch.Tensor, t: torch.Tensor) -> bool:
+    """Whether the argument is positive: a number always checked; a tensor only where reading it is free (CPU),
+    not on a GPU, where it would make the host wait for the device."""
+    if not isinstance(value, torch.Tensor):
+        return float(value) > 0
+    return not host_path(t.device) or bool((t > 0).all())
 
 
 def _pull_push_fill(values: torch.Tensor, weight: torch.Tensor) -> torch.Tensor:
@@ -248,15 +257,18 @@ def domain_transform_filter(
     boxes = _domain_boxes(rgb.to(device=depth.device, dtype=coord_dtype), ss.to(coord_dtype), sc.to(coord_dtype),
                           ss_max, iterations)
     est, filled = _normalised_domain_pass(depth, m, boxes)
+    # once every pixel is filled the passes and the pull-push change nothing: the CPU stops, other devices run them
+    # (asking would make the host wait for the device)
+    cpu = host_path(depth.device)
     for _ in range(fill_passes):
-        if bool(filled.all()):
+        if cpu and bool(filled.all()):
             break
         est2, more = _normalised_domain_pass(est, filled.to(depth.dtype), boxes)
         newly = (~filled) & more
         est = torch.where(newly, est2, est)
         filled = filled | newly
-    if not bool(filled.all()):
-        est = _pull_push_fill(est, filled.to(depth.dtype))
+    if not cpu or not bool(filled.all()):
+        est = _pull_push_fill(est, filled.to(depth.dtype))  # keeps est where filled
     return est
 
 
@@ -270,7 +282,7 @@ def _band_budget(device: torch.device) -> int | None:
     40 % slower there (9×9 at 640×480), while on a GPU one 11×11 pass over a batch of 8 at 1376×1088
     allocated about 39 GB.
     """
-    return None if device.type == "cpu" else 2 ** 26
+    return None if host_path(device) else 2 ** 26
 
 
 def _masked_jbf_pass(
@@ -392,15 +404,18 @@ def joint_bilateral_filter(
 
     est, weight = _masked_jbf_pass(depth, rgb, m, kernel_size, ss, sc, color_distance_type)
     filled = weight > 0  # (B, 1, H, W)
+    # once every pixel is filled the passes and the pull-push change nothing: the CPU stops, other devices run them
+    # (asking would make the host wait for the device)
+    cpu = host_path(depth.device)
     for _ in range(fill_passes):
-        if bool(filled.all()):
+        if cpu and bool(filled.all()):
             break
         est2, w2 = _masked_jbf_pass(est, rgb, filled.to(depth.dtype), kernel_size, ss, sc, color_distance_type)
         newly = (~filled) & (w2 > 0)
         est = torch.where(newly, est2, est)
         filled = filled | newly
-    if not bool(filled.all()):
-        est = _pull_push_fill(est, filled.to(depth.dtype))
+    if not cpu or not bool(filled.all()):
+        est = _pull_push_fill(est, filled.to(depth.dtype))  # keeps est where filled
     return est
 
 

@@ -14,6 +14,7 @@ from torch import nn
 from .config import InitConfig, RestorerConfig, SidedFill, UpsamplingConfig
 from .fill import fill_holes, fill_holes_sided
 from .guided_filters import domain_transform_filter, joint_bilateral_filter
+from .native import host_path
 from .nonlocal_prior import nonlocal_terms
 from .observation import Observation
 from .operators import area_downsample, grad
@@ -43,7 +44,8 @@ def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[t
     est, g = _FILLS["pushpull" if guide is None else c.fill](yn, observed, guide, factor, c)
     confident = torch.ones_like(observed)
     one_side = torch.zeros_like(observed)
-    if sided_fill is not None and not bool((observed > 0).all()):
+    # the sided fill changes nothing without holes: the CPU skips it then, other devices run it (no host wait)
+    if sided_fill is not None and (not host_path(observed.device) or not bool((observed > 0).all())):
         ambiguous = sided_fill.ambiguous
         kernel = max(3, min(c.kernel_size, 2 * (min(yn.shape[-2:]) // 2) + 1))
         with torch.no_grad():

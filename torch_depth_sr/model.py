@@ -161,7 +161,7 @@ class DepthRestorer(nn.Module):
         (and of :class:`~torch_depth_sr.transforms.RestoreDepth` and the command line), not of the module: they
         are refused here with a message that says so.
         """
-        out = self._run_tensors(depth, rgb, mask, noise_sigma, scale_factor, fill, timed=False)
+        out = self._run_tensors(depth, rgb, mask, noise_sigma, scale_factor, fill, timed=False, details=False)
         return out.depth.to(device=depth.device, dtype=depth.dtype)
 
     def restore_with_details(self, depth: torch.Tensor, rgb: Optional[torch.Tensor] = None,
@@ -189,24 +189,26 @@ class DepthRestorer(nn.Module):
 
     def _run_tensors(self, depth: torch.Tensor, rgb: Optional[torch.Tensor], mask: Optional[torch.Tensor],
                      noise_sigma: NoiseSigma, scale_factor: Optional[int], fill: str,
-                     timed: bool) -> "RestorationResult":
+                     timed: bool, details: bool = True) -> "RestorationResult":
         """Check the tensors at the boundary, then :meth:`_run` (float64 input computes in float64, else float32)."""
         _check_fill(fill)
         _check_model_input(depth, rgb, mask)
         dtype = torch.float64 if depth.dtype == torch.float64 else torch.float32
         y, observed, _ = parse_depth(depth, mask, dtype)  # validates values: no inf, no negative, something measured
-        return self._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=timed, integer_input=False)
+        return self._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=timed, integer_input=False,
+                         details=details)
 
     def _run(self, y: torch.Tensor, observed: torch.Tensor, rgb: Any, noise_sigma: NoiseSigma,
              scale_factor: Optional[int], fill: str, timed: bool, integer_input: bool,
-             stream: Any = None) -> "RestorationResult":
+             stream: Any = None, details: bool = True) -> "RestorationResult":
         """The algorithm on parsed input: ``y``, ``observed`` (B,1,H,W) in the compute dtype (0 at missing).
 
         Returns the :class:`RestorationResult` on the model's device, depth in the compute dtype (NaN where
         ``fill="trusted"`` leaves a hole missing). ``integer_input``: the values were integers (uint16 millimetres,
         say), so their grid step is at least 1. ``stream``: the hooks of a
         :class:`~torch_depth_sr.stream.StreamRestorer` (the previous frame into the observation and the initial
-        stage, this frame kept for the next); None = a frame on its own.
+        stage, this frame kept for the next); None = a frame on its own. ``details=False`` (:meth:`forward`) leaves
+        ``info`` empty: its numbers are read on the host, which on a GPU would wait for the device.
         """
         stream = _NO_STREAM if stream is None else stream
         dev = self.block_matcher.log_temperature.device  # compute where the model lives; callers move the result back
@@ -232,7 +234,8 @@ class DepthRestorer(nn.Module):
         stream.keep(x, state, obs, initial)
         if fill == "trusted":
             x = _leave_unconfident_missing(x, initial.fill_confident, obs)
-        info = {"noise_sigma": obs.sigma.tolist(), "scale": obs.scale.tolist(), "offset": obs.offset.tolist(),
+        info = {} if not details else {
+                "noise_sigma": obs.sigma.tolist(), "scale": obs.scale.tolist(), "offset": obs.offset.tolist(),
                 "implausible_pixels": obs.glitches.flatten(1).sum(1).tolist(),
                 "cg_iterations": [int(n.max()) for n in obs.log.cg_iterations], "factor": K.scale,
                 "seconds": dict(obs.log.timings or {})}

@@ -42,8 +42,8 @@ import torch
 
 from .errors import DepthSRError
 
-__all__ = ["as_numpy", "compiled_signatures", "cpu_kernel", "kernel_cache_dir", "kernel_threads", "numba_disabled",
-           "run_tasks"]
+__all__ = ["as_numpy", "compiled_signatures", "cpu_kernel", "device_path_forced", "host_path", "kernel_cache_dir",
+           "kernel_threads", "numba_disabled", "run_tasks"]
 
 _FAILED: Optional[str] = None  # why numba is unavailable, once known
 _CONFIGURED = False
@@ -57,6 +57,19 @@ _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per
 def numba_disabled() -> bool:
     """Whether ``TORCH_DEPTH_SR_NO_NUMBA`` turns the kernels off."""
     return os.environ.get("TORCH_DEPTH_SR_NO_NUMBA", "") not in ("", "0")
+
+
+def device_path_forced() -> bool:
+    """Whether ``TORCH_DEPTH_SR_DEVICE_PATH`` makes the CPU run the path of the other devices (tests)."""
+    return os.environ.get("TORCH_DEPTH_SR_DEVICE_PATH", "") not in ("", "0")
+
+
+def host_path(device: torch.device) -> bool:
+    """Whether work on ``device`` takes the CPU path: the numba kernels, and the shortcuts that read a tensor's
+    values on the host to skip work (free on the CPU; on a GPU each would make the host wait for the device). Every
+    other device takes the device path: torch kernels, no host synchronisation, the same values.
+    ``TORCH_DEPTH_SR_DEVICE_PATH=1`` sends the CPU down the device path too, so that tests check it without a GPU."""
+    return device.type == "cpu" and not device_path_forced()
 
 
 def _configure_numba() -> None:

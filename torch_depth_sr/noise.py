@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import torch
 
+from .native import host_path
+
 __all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "quantisation_step", "sample_percentiles",
            "white_noise_sigma"]
 
@@ -67,6 +69,10 @@ def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, method: st
     mh = m[..., :, :-2] & m[..., :, 1:-1] & m[..., :, 2:]
     dv = d[..., :-2, :] - 2 * d[..., 1:-1, :] + d[..., 2:, :]
     mv = m[..., :-2, :] & m[..., 1:-1, :] & m[..., 2:, :]
+    if not host_path(depth.device):  # every sample at once, no value read on the host: the same medians
+        vals, n = _sorted_rows(torch.cat([dh.flatten(1), dv.flatten(1)], 1).abs(),
+                               torch.cat([mh.flatten(1), mv.flatten(1)], 1))
+        return torch.where(n >= 16, _MAD_TO_STD * _lower_median(vals, n) / 6**0.5, out)
     for i in range(b):
         vals = torch.cat([dh[i][mh[i]], dv[i][mv[i]]]).abs()
         if vals.numel() >= 16:
@@ -156,6 +162,8 @@ def quantisation_step(depth: torch.Tensor, observed: torch.Tensor, integer_input
         tensor([2.])
     """
     b = depth.shape[0]
+    if not host_path(depth.device):
+        return _grid_steps(depth.detach().double().flatten(1), observed.flatten(1) > 0, integer_input).to(depth.dtype)
     out = depth.new_zeros(b)
     for i in range(b):
         vals = depth[i][observed[i] > 0].detach().double()
@@ -171,6 +179,55 @@ def _percentiles(vals: torch.Tensor) -> torch.Tensor:
     if sub.device.type != "cpu" or sub.numel() < 2 or bool(torch.isnan(sub).any()):
         return torch.quantile(sub.to(dt), q.to(sub.device)).to(vals.dtype)
     return _quantiles_by_selection(sub.to(dt).reshape(-1), q).to(vals.dtype)
+
+
+# ---- the device path: the per-sample statistics above for every sample at once, with the shapes of the input (no
+# boolean selection, no value read on the host); each gives what its CPU loop gives, bit for bit
+def _sorted_rows(values: torch.Tensor, keep: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each row of ``values (B,N)`` sorted with the kept values first (the others as +inf after them; kept values
+    are finite), and the count ``(B,)`` kept."""
+    inf = torch.full_like(values, float("inf"))
+    return torch.where(keep, values, inf).sort(1).values, keep.sum(1)
+
+
+def _lower_median(rows: torch.Tensor, n: torch.Tensor) -> torch.Tensor:
+    """What ``torch.median`` gives for the first ``n`` values of each sorted row (the lower of two middles); NaN for
+    none, as torch.median of nothing."""
+    m = rows.gather(1, ((n - 1).clamp_min(0) // 2)[:, None])[:, 0]
+    return torch.where(n > 0, m, torch.full_like(m, float("nan")))
+
+
+def _masked_percentiles(values: torch.Tensor, keep: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+    """:func:`_percentiles` of the kept values of each row of ``values (B,N)`` (``out (B,2)`` where fewer than two):
+    the same subsample of large rows (every s-th kept value), the same ranks and interpolation."""
+    dt = torch.float64 if values.dtype == torch.float64 else torch.float32
+    n = keep.sum(1, keepdim=True)
+    step = torch.where(n < 16_000_000, torch.ones_like(n), (n // 1_000_000).clamp_min(1))
+    keep = keep & ((keep.cumsum(1) - 1) % step == 0)
+    rows, m = _sorted_rows(values.to(dt), keep)
+    q = torch.tensor([0.01, 0.99], dtype=dt, device=values.device)
+    ranks = q[None] * (m - 1).clamp_min(0).to(dt)[:, None]  # (B, 2), as q * (numel - 1)
+    below, above = ranks.to(torch.long), ranks.ceil().to(torch.long)
+    p = rows.gather(1, below).lerp(rows.gather(1, above), ranks - below)
+    return torch.where(n > 1, p.to(values.dtype), out)
+
+
+def _grid_steps(vals: torch.Tensor, keep: torch.Tensor, integer_input: bool) -> torch.Tensor:
+    """:func:`_grid_step` of the kept values of each row of ``vals (B,N)`` float64, from one sort: the distinct
+    values are where the sorted row changes, the smallest gap between them is the smallest positive difference."""
+    rows, n = _sorted_rows(vals, keep)
+    pos = torch.arange(rows.shape[1], device=rows.device)[None]
+    diff = rows[:, 1:] - rows[:, :-1]
+    pair = pos[:, 1:] < n[:, None]  # both values kept
+    distinct = torch.where(n > 0, 1 + (pair & (diff > 0)).sum(1), n)
+    step = torch.where(pair & (diff > 0), diff, torch.full_like(diff, float("inf"))).amin(1)
+    ratio = rows / step[:, None]
+    inside = pos < n[:, None]
+    err = torch.where(inside, (ratio - ratio.round()).abs(), torch.zeros_like(ratio)).amax(1)
+    big = torch.where(inside, ratio.abs(), torch.zeros_like(ratio)).amax(1)
+    on_grid = (distinct >= 2) & (distinct <= n // 4) & (err < 1e-4) & (big < 2**40)
+    default = torch.full_like(step, 1.0) * ((n > 0) & integer_input)
+    return torch.where(on_grid, step, default)
 
 
 def _quantiles_by_selection(v: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
@@ -195,6 +252,8 @@ def sample_percentiles(depth: torch.Tensor, observed: torch.Tensor) -> torch.Ten
         tensor([[ 0.9900, 98.0100]])
     """
     out = depth.new_zeros(depth.shape[0], 2)
+    if not host_path(depth.device):
+        return _masked_percentiles(depth.detach().flatten(1), observed.flatten(1) > 0, out)
     for i in range(depth.shape[0]):
         vals = depth[i][observed[i] > 0].detach()
         if vals.numel() > 1:
@@ -218,6 +277,14 @@ def implausible(depth: torch.Tensor, observed: torch.Tensor, scale: torch.Tensor
         1
     """
     out = torch.zeros_like(observed, dtype=torch.bool)
+    if not host_path(depth.device):  # the same bounds, every sample at once
+        m = observed > 0
+        p = (percentiles if percentiles is not None else sample_percentiles(depth, observed)).view(-1, 2, 1, 1, 1)
+        p1, p99 = p[:, 0], p[:, 1]
+        r, s = p99 - p1, scale.view(-1, 1, 1, 1)
+        lo, hi = p1 - r - margin * s, p99 + r + margin * s
+        enough = m.flatten(1).sum(1).view(-1, 1, 1, 1) >= 2
+        return m & enough & ((depth < lo) | (depth > hi))
     for i in range(depth.shape[0]):
         m = observed[i] > 0
         if int(m.sum()) < 2:
@@ -259,9 +326,12 @@ def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma: float 
     ``percentiles``: :func:`sample_percentiles` of the same input, when the caller has them.
     """
     b = depth.shape[0]
-    offset = depth.new_zeros(b)
-    for i in range(b):
-        offset[i] = depth[i][observed[i] > 0].detach().median()
+    if host_path(depth.device):
+        offset = depth.new_zeros(b)
+        for i in range(b):
+            offset[i] = depth[i][observed[i] > 0].detach().median()
+    else:
+        offset = _lower_median(*_sorted_rows(depth.detach().flatten(1), observed.flatten(1) > 0))
     q = sample_percentiles(depth, observed) if percentiles is None else percentiles
     spread = q[:, 1] - q[:, 0]
     if noise_sigma is None:

@@ -18,7 +18,7 @@ import torch
 
 from ._checks import check_4d, check_same_shape
 from .block_matching import BlockMatches, gather_neighbors
-from .native import cpu_kernel
+from .native import cpu_kernel, host_path
 
 __all__ = ["nonlocal_gradient", "nonlocal_terms", "nonlocal_value_prior"]
 
@@ -169,7 +169,7 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
     if range_sigma is not None:
         range_sigma = torch.as_tensor(range_sigma, dtype=x.dtype, device=x.device)
     kernel = None
-    if backend == "auto" and not tracked and x.device.type == "cpu" and x.dtype in (torch.float32, torch.float64):
+    if backend == "auto" and not tracked and host_path(x.device) and x.dtype in (torch.float32, torch.float64):
         kernel = _kernel()
     if kernel is not None:
         alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight, plane_ridge, range_sigma)

@@ -13,6 +13,7 @@ import torch
 
 from ._checks import check_noise_sigma
 from .noise import depth_scale, implausible, quantisation_step, sample_percentiles, white_noise_sigma
+from .native import host_path
 from .operators import Degradation
 from .state import RunLog
 
@@ -80,7 +81,9 @@ def observe(y: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tenso
     offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step,
                                        percentiles=percentiles)
     glitches = implausible(y, observed, scale, percentiles=percentiles)
-    if bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
+    # off the CPU the scale is estimated again whatever the glitches (without any it comes out the same): asking
+    # would make the host wait for the device
+    if not host_path(y.device) or bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
         observed = torch.where(glitches, torch.zeros_like(observed), observed)
         step = quantisation_step(y, observed, integer_input=integer_input)
         offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)

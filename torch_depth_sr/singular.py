@@ -29,7 +29,7 @@ import torch
 from ._checks import check_4d, check_per_sample, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError
-from .native import cpu_kernel
+from .native import cpu_kernel, host_path
 
 __all__ = ["detect_singular", "neighbour_support", "line_support"]
 
@@ -151,7 +151,7 @@ def _singular_torch(y0, obs, xv, matches: BlockMatches, floor, tau: float, round
     the device every round, so every round runs.
     """
     if early_exit is None:
-        early_exit = y0.device.type == "cpu"
+        early_exit = host_path(y0.device)
     dt = y0.dtype
     xj = gather_neighbors(xv, matches.index)[:, 0]  # (B, k, H, W)
     w0 = matches.weight.detach().to(dt)  # (B, k, H, W)
@@ -240,7 +240,7 @@ def detect_singular(
         obs = (observed.detach() > 0) & torch.isfinite(yv)  # (B,1,H,W) bool
         y0 = torch.where(obs, yv, torch.zeros_like(yv))
         kernel = None
-        if backend != "torch" and y0.device.type == "cpu" and dt in (torch.float32, torch.float64):
+        if backend != "torch" and host_path(y0.device) and dt in (torch.float32, torch.float64):
             kernel = _numba_kernel()
         if kernel is None and backend == "numba":
             raise DepthSRError("backend='numba' needs CPU float32/float64 tensors and numba (got tensors on "

@@ -38,7 +38,7 @@ import torch
 from .._checks import check_4d, check_same_hw
 from ..errors import DepthSRError
 from ._common import BlockMatches, Scalar, finish, prepare
-from ..native import cpu_kernel
+from ..native import cpu_kernel, host_path
 from .reference import block_match_reference
 from .refine import refine_matches
 from .torch_search import block_match_torch
@@ -117,7 +117,7 @@ def block_match(
         raise DepthSRError(f"chunk_rows must be None or an int >= 1; got {chunk_rows!r}.")
     on_cpu = depth.device.type == "cpu"
     exact_cpu = (cpu_kernel("block_matching.cpu_exact", "block_match_cpu_exact", required=backend == "numba")
-                 if on_cpu and backend != "torch" else None)  # numba (torch_depth_sr.native loads it)
+                 if host_path(depth.device) and backend != "torch" else None)  # numba (torch_depth_sr.native loads it)
     if backend == "numba" and not on_cpu:
         raise DepthSRError(f"backend='numba' runs on the CPU; depth is on {depth.device}. Use 'auto' or 'torch'.")
     with torch.no_grad():

@@ -8,6 +8,7 @@ import torch
 
 from .._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw
 from ..errors import DepthSRError, ShapeError
+from ..native import host_path
 
 __all__ = ["BlockMatches", "candidates_everywhere", "lattice", "prepare", "finish", "index_from_offsets", "offset_order",
            "symmetric_order"]
@@ -56,6 +57,8 @@ def _per_sample(value: Scalar, name: str, batch: int, positive: bool) -> torch.T
         except (TypeError, ValueError):
             raise DepthSRError(f"{name} must be a float or a (B,) tensor; got {type(value).__name__}.") from None
     vd = v.detach()
+    if not host_path(vd.device):  # a tensor off the CPU is not read: that would make the host wait for the device
+        return v
     bad = ~torch.isfinite(vd) | ((vd <= 0) if positive else (vd < 0))
     if bool(bad.any()):
         rule = "> 0" if positive else ">= 0"

@@ -1,6 +1,15 @@
-"""``python -m torch_depth_sr.evaluation.gpu_report``: check and time the model on a CUDA GPU in one run.
+"""``python -m torch_depth_sr.evaluation.gpu_report``: time every speed tier on a CUDA GPU in one command.
 
-Four parts, printed as tables and written as JSON under ``--out``:
+``python -m torch_depth_sr.evaluation.gpu_report [--sizes 480x640 1088x1376] [--batch 1 8] [--out DIR]`` times, per
+size (height x width) and batch, the tiers ``fast``, ``default`` and ``best`` and kornia's ``joint_bilateral_blur``
+9x9 as the reference: warm-up calls, then the median ms per frame of ``--repeats`` calls timed with CUDA events, the
+peak memory (``torch.cuda.max_memory_allocated`` over what was allocated before), and for the default tier an
+attempt to capture its forward as a CUDA graph (static inputs) with the replay's ms per frame, or the error text.
+It prints a table and writes ``gpu_report.json`` and ``gpu_report.md`` under ``--out``. Without CUDA it prints one
+line and exits with status 2.
+
+The functions below ``main``'s table are the earlier parts of the report (run on any device by the tests; not by
+``main``):
 
 1. **agreement** — the GPU path (torch block matching, torch singular test) against the CPU path
    (numba kernels; both with exact re-matching) on the same synthetic frames: share of identical matches, largest distance
@@ -126,41 +135,143 @@ def profile(device: str, height: int, width: int, path: Path) -> dict:
     return {"kernel_launches": launches, "ops": sum(e.count for e in avg)}
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    from .report import metadata as _metadata, print_table as _print_table
+TIERS = ("fast", "default", "best")
+COLUMNS = ["method", "size", "batch", "ms_per_frame", "peak_mb", "graph", "graph_ms_per_frame", "graph_max_abs_diff"]
 
+
+def _event_ms(fn, repeats: int, warmup: int) -> float:
+    """Median milliseconds of ``fn()`` after ``warmup`` calls, each timed by CUDA events around it."""
+    for _ in range(warmup):
+        fn()
+    torch.cuda.synchronize()
+    times = []
+    for _ in range(repeats):
+        start, end = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+        start.record()
+        fn()
+        end.record()
+        end.synchronize()
+        times.append(start.elapsed_time(end))
+    return statistics.median(times)
+
+
+def _peak_mb(fn) -> float:
+    """MB that one call of ``fn`` allocated at its peak over what was allocated before it."""
+    torch.cuda.synchronize()
+    before = torch.cuda.memory_allocated()
+    torch.cuda.reset_peak_memory_stats()
+    fn()
+    torch.cuda.synchronize()
+    return (torch.cuda.max_memory_allocated() - before) / 2 ** 20
+
+
+def _graph(model, depth: torch.Tensor, rgb: torch.Tensor, repeats: int, warmup: int) -> dict:
+    """Capture ``model(depth, rgb)`` as a CUDA graph on static copies of the inputs and time its replay; the
+    error's first line instead when the capture fails (the report goes on)."""
+    static_depth, static_rgb = depth.clone(), rgb.clone()
+    try:
+        side = torch.cuda.Stream()  # warm-up on a side stream before capturing, as torch.cuda.graphs asks
+        side.wait_stream(torch.cuda.current_stream())
+        with torch.cuda.stream(side), torch.no_grad():
+            for _ in range(2):
+                model(static_depth, static_rgb)
+        torch.cuda.current_stream().wait_stream(side)
+        graph = torch.cuda.CUDAGraph()
+        with torch.no_grad(), torch.cuda.graph(graph):
+            static_out = model(static_depth, static_rgb)
+        ms = _event_ms(graph.replay, repeats, warmup)
+        graph.replay()
+        with torch.no_grad():
+            eager = model(static_depth, static_rgb)
+        diff = float((static_out - eager).abs().max())
+        return {"graph": "captured", "graph_ms_per_frame": ms / depth.shape[0], "graph_max_abs_diff": diff}
+    except Exception as exc:  # any failure of the capture is a result to report, not a crash
+        first = (str(exc).strip().splitlines() or [""])[0]
+        return {"graph": f"failed: {type(exc).__name__}: {first}"[:300]}
+
+
+def _kornia_jbf9(depth: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
+    import kornia
+
+    return kornia.filters.joint_bilateral_blur(depth, rgb, (9, 9), 0.1, (3.0, 3.0))
+
+
+def measure_all(sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeats: int, warmup: int) -> list[dict]:
+    """One row per (method, size, batch) on ``cuda``: the tiers, then kornia's 9x9 joint bilateral filter."""
+    rows = []
+    models = {tier: DepthRestorer.from_preset(tier).to("cuda").eval() for tier in TIERS}
+    for h, w in sizes:
+        for b in batches:
+            depth, rgb, _ = speed.make_inputs(h, w, b)
+            depth, rgb = depth.to("cuda"), rgb.to("cuda")
+            runs = {tier: (lambda m=m: m(depth, rgb)) for tier, m in models.items()}
+            runs["kornia-jbf9"] = lambda: _kornia_jbf9(depth, rgb)
+            for name, run in runs.items():
+                row = {"method": name, "size": f"{h}x{w}", "batch": b}
+                try:
+                    with torch.no_grad():
+                        row["ms_per_frame"] = _event_ms(run, repeats, warmup) / b
+                        row["peak_mb"] = _peak_mb(run)
+                except torch.cuda.OutOfMemoryError as exc:
+                    row["error"] = f"out of memory: {str(exc).splitlines()[0]}"[:300]
+                    torch.cuda.empty_cache()
+                if name == "default" and "error" not in row:
+                    row.update(_graph(models["default"], depth, rgb, repeats, warmup))
+                rows.append(row)
+                print(format_table([row], header=not rows[:-1]), flush=True)
+    return rows
+
+
+def _cell(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.3g}" if abs(v) < 100 else f"{v:.0f}"
+    return str(v)
+
+
+def format_table(rows: Sequence[dict], header: bool = True) -> str:
+    """A Markdown table of report rows (the columns of :data:`COLUMNS`, then ``error`` when a row has one)."""
+    cols = COLUMNS + (["error"] if any("error" in r for r in rows) else [])
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)] if header else []
+    lines += ["| " + " | ".join(_cell(r.get(c)) for c in cols) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        h, w = (int(t) for t in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a size is HEIGHTxWIDTH, e.g. 480x640; got {text!r}") from None
+    return h, w
+
+
+NO_GPU = "gpu_report: no GPU is available (torch.cuda.is_available() is False); nothing was measured."
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--device", default="cuda")
+    p.add_argument("--sizes", nargs="+", type=_size, default=[(480, 640), (1088, 1376)], help="HEIGHTxWIDTH ...")
+    p.add_argument("--batch", nargs="+", type=int, default=[1, 8])
     p.add_argument("--out", default="out/gpu")
-    p.add_argument("--sizes", default="370x463,480x640,1088x1376")
-    p.add_argument("--batches", default="1,8")
     p.add_argument("--repeats", type=int, default=10)
-    p.add_argument("--skip", default="dictionary@1088x1376x8",
-                   help="comma-separated method@HxWxB rows of the speed table not to run")
+    p.add_argument("--warmup", type=int, default=3)
     a = p.parse_args(argv)
+    if not torch.cuda.is_available():
+        print(NO_GPU)
+        return 2
+    from .report import metadata
+
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    sizes, batches = speed._parse_sizes(a.sizes), speed._parse_ints(a.batches)
-    report = {"metadata": _metadata(a.device)}
-    print(report["metadata"], flush=True)
-
-    report["agreement"] = [agreement(a.device, *sizes[min(1, len(sizes) - 1)], 1), agreement(a.device, 64, 80, 3)]
-    _print_table(report["agreement"], list(report["agreement"][0]), "GPU against CPU (same synthetic inputs)")
-
-    vga = [(480, 640)]  # the selection study at 640×480 whatever --sizes says (larger key stacks pass 2³¹ elements)
-    report["selection"] = sel = selection_times(a.device, vga, batches, a.repeats)
-    _print_table(sel, list(sel[0]), "top-k selection of the block-matching keys (seconds; the model uses 'split')")
-    report["block_matching"] = matching_times(a.device, sizes, batches, a.repeats)
-    _print_table(report["block_matching"], ["size", "batch", "seconds", "ms_per_frame"], "one block-matching pass")
-
-    report["profile"] = profile(a.device, *sizes[min(1, len(sizes) - 1)], out / "profile.txt")
-    print(report["profile"], flush=True)
-    (out / "gpu_report.json").write_text(json.dumps(report, indent=1))
-
-    ns = argparse.Namespace(device=a.device, sizes=sizes, batches=batches, repeats=a.repeats, isolate=False,
-                            skip=tuple(t for t in a.skip.split(",") if t), max_seconds=30.0,
-                            methods=list(speed.METHODS), json=str(out / "speed.json"))
-    return speed.run_speed(ns)
+    meta = metadata("cuda")
+    print(meta, flush=True)
+    rows = measure_all(a.sizes, a.batch, a.repeats, a.warmup)
+    (out / "gpu_report.json").write_text(json.dumps({"metadata": meta, "rows": rows}, indent=1, default=str))
+    (out / "gpu_report.md").write_text(f"GPU report, commit {meta.get('commit')}, {meta.get('gpu', meta.get('device'))}"
+                                       f"\n\n{format_table(rows)}\n")
+    print(f"wrote {out / 'gpu_report.json'} and {out / 'gpu_report.md'}")
+    return 0
 
 
 if __name__ == "__main__":
