@@ -405,8 +405,10 @@ class StreamConfig(Group):
     from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
     parts keep the previous frame's matches."""
 
-    weight: float = 1.0
-    max_frames: float = 8.0
+    # weight and max_frames fitted on the tuning sequences with the fast tier (docs/measurements/issue28-stream/
+    # tune_stream.py): the lowest flicker among the settings no worse than frame by frame in RMSE and trail
+    weight: float = 2.0
+    max_frames: float = 16.0
     unmeasured_frames: float = 2.0
     hole_decay: float = 0.8
     fill_evidence: float = 1.0
