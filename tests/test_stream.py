@@ -348,3 +348,30 @@ def test_recordings_factory_streams_and_replays(tmp_path):
         expected = stream.step(d, c[None])
         written = cv2.imread(str(tmp_path / "out" / "rec" / "depth" / f"{t:03d}.png"), cv2.IMREAD_UNCHANGED)
         assert np.array_equal(written, expected), t
+
+
+@pytest.mark.parametrize("name", ["frame", "stream", "rs-temporal+frame"])
+@pytest.mark.parametrize("given", [False, True])
+def test_stream_track_methods_run_their_model_on_the_requested_device(name, given):
+    # the colour goes to `device`; the model computes where its parameters are, so it must be moved there too
+    # ("meta" stands for a device other than the CPU: a model on the CPU must leave it)
+    from torch_depth_sr.evaluation.stream import make_method
+
+    model = DepthRestorer(num_layers=1) if given else None
+    method = make_method(name, model, device="meta")
+    devices = {p.device for p in method.model.parameters()} | {b.device for b in method.model.buffers()}
+    assert devices == {torch.device("meta")}
+    if given:
+        assert method.model is model
+
+
+def test_stream_track_method_on_cpu_restores():
+    from torch_depth_sr.evaluation.stream import make_method
+
+    d = np.full((24, 32), 1000, np.uint16)
+    d[5:9, 5:9] = 0
+    method = make_method("stream", DepthRestorer(num_layers=1), device="cpu")
+    assert {p.device for p in method.model.parameters()} == {torch.device("cpu")}
+    for _ in range(2):
+        out = method.step(d, torch.zeros(3, 24, 32))
+    assert out.shape == d.shape

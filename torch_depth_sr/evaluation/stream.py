@@ -77,15 +77,18 @@ def _model(name: str, device: str):
 class _Method:
     """A restorer of one stream: ``step(depth uint16 (H,W), rgb (3,H,W) float) -> (H,W)``, ``reset()``."""
 
-    def __init__(self, step: Callable, reset: Callable = lambda: None):
-        self.step, self.reset = step, reset
+    def __init__(self, step: Callable, reset: Callable = lambda: None, model: Optional[torch.nn.Module] = None):
+        self.step, self.reset, self.model = step, reset, model
 
 
 def make_method(name: str, model: Optional["DepthRestorer"] = None, fill: str = "all",
                 rs_params: Optional[dict] = None, device: str = "cpu") -> _Method:
-    """The stream restorer ``name`` of :data:`METHODS` (``model``: the DepthRestorer of the model methods)."""
-    from ..model import restore_depth
+    """The stream restorer ``name`` of :data:`METHODS` (``model``: the DepthRestorer of the model methods, default
+    ``DepthRestorer()``; it is moved to ``device``, where the colour goes: the model computes on its own device)."""
+    from ..model import DepthRestorer, restore_depth
 
+    if name in ("rs-temporal+frame", "frame", "stream"):
+        model = (DepthRestorer() if model is None else model).to(device)
     if name == "raw":
         return _Method(lambda d, rgb: d)
     if name in ("rs-temporal", "rs-temporal+frame"):
@@ -101,12 +104,12 @@ def make_method(name: str, model: Optional["DepthRestorer"] = None, fill: str = 
                 return f
             with torch.no_grad():
                 return restore_depth(f, rgb[None].to(device), model=model, fill=fill)
-        return _Method(rs_frame, rs.reset)
+        return _Method(rs_frame, rs.reset, model)
     if name == "frame":
         def frame(d, rgb):
             with torch.no_grad():
                 return restore_depth(d, rgb[None].to(device), model=model, fill=fill)
-        return _Method(frame)
+        return _Method(frame, model=model)
     if name == "stream":
         from ..stream import StreamRestorer
 
@@ -115,7 +118,7 @@ def make_method(name: str, model: Optional["DepthRestorer"] = None, fill: str = 
         def step(d, rgb):
             with torch.no_grad():
                 return stream.step(d, rgb[None].to(device))
-        return _Method(step, stream.reset)
+        return _Method(step, stream.reset, model)
     raise UsageError(f"unknown stream method {name!r}; allowed are {list(METHODS)}")
 
 
