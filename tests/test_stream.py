@@ -375,3 +375,38 @@ def test_stream_track_method_on_cpu_restores():
     for _ in range(2):
         out = method.step(d, torch.zeros(3, 24, 32))
     assert out.shape == d.shape
+
+
+def _still_sequence(t=4, h=12, w=16):
+    """A synthetic sequence without movers: its trail region is empty."""
+    gt = np.full((t, 1, h, w), 1000.0, np.float32)
+    return {"gt": gt, "depth": gt.astype(np.uint16), "rgb": np.zeros((t, 3, h, w), np.float32),
+            "moving": np.zeros((t, 1, h, w), bool), "hold_from": 0}
+
+
+def test_trail_of_a_sequence_without_movers_is_nan_and_left_out_of_the_means(monkeypatch):
+    import warnings
+
+    from torch_depth_sr.evaluation import stream as track
+
+    seq = _still_sequence()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "Mean of empty slice": the empty region is handled, not stumbled on
+        m = track.synthetic_metrics(seq["gt"][:, 0] + 1, seq)
+    assert np.isnan(m["trail"]) and m["rmse"] == pytest.approx(1.0)
+    rows = [{"set": "synthetic", "sequence": n, "method": "raw", "trail": v} for n, v in (("a", m["trail"]),
+                                                                                          ("b", 3.0), ("c", 5.0))]
+    assert track.summarise(rows)[0]["trail"] == 4.0
+    # tune_realsense: one tuning sequence without a trail must not make the mean trail NaN
+    regions = track.regions
+    seen = []
+
+    def no_trail_in_the_first(seq):
+        reg = regions(seq)
+        if not seen:
+            reg["trail"] = np.zeros_like(reg["trail"])
+        seen.append(1)
+        return reg
+    monkeypatch.setattr(track, "regions", no_trail_in_the_first)
+    res = track.tune_realsense(frames=16, size=(32, 40), grid=dict(alpha=(0.1,), delta=(50.0,), persistence=(0,)))
+    assert len(res) == 1 and np.isfinite(res[0]["trail"]) and np.isfinite(res[0]["rmse"])

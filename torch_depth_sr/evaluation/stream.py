@@ -20,7 +20,8 @@ pulled-pushed (:func:`~torch_depth_sr.fill.fill_holes`) before they are scored, 
   ground truth and colour never change there (the mean over those pixels; ``flicker_med`` the median);
   ``flicker_step``: the mean absolute frame-to-frame change of the error there (a lasting change counts once);
 * ``trail``: the RMSE over the pixels near moving objects — within 2 px of a mover now or covered by one in the 4
-  frames before (what a temporal filter smears).
+  frames before (what a temporal filter smears); NaN on a sequence without movers (no such pixel), and left out of
+  the means over sequences (:func:`summarise`, :func:`tune_realsense`), which average the sequences that have one.
 
 **Real sequences** (``--sets real``): ``real_sequences/realsense_static_tabletop`` and ``realsense_d435_t265_desk``
 (the first ``--real-frames`` frames, every ``--real-stride``-th pixel), no ground truth; the models run with
@@ -172,7 +173,20 @@ def synthetic_metrics(out: np.ndarray, seq: dict, reg: Optional[dict] = None) ->
     std = es.std(0)
     return {"rmse": float(rmse.mean()), "mae": float(np.abs(e).mean()), "flicker": float(std.mean()),
             "flicker_med": float(np.median(std)), "flicker_step": float(np.abs(np.diff(es, axis=0)).mean()),
-            "trail": float(np.sqrt((e[reg["trail"]] ** 2).mean())), "static_share": float(reg["static"].mean())}
+            "trail": _rms(e[reg["trail"]]), "static_share": float(reg["static"].mean())}
+
+
+def _rms(e: np.ndarray) -> float:
+    """The RMS of ``e``; NaN (documented, no warning) when it is empty: a region with no pixel has no score."""
+    return float(np.sqrt((e ** 2).mean())) if e.size else float("nan")
+
+
+def _nanmean(rows: list, axis: int = 0) -> np.ndarray:
+    """The mean over sequences leaving out non-finite scores (NaN: a sequence with no pixel in a region), as
+    :func:`summarise` does; NaN only where every sequence has none."""
+    a = np.asarray(rows, dtype=np.float64)
+    n = np.isfinite(a).sum(axis)
+    return np.where(n > 0, np.where(np.isfinite(a), a, 0).sum(axis) / np.maximum(n, 1), np.nan)
 
 
 def _synthetic(args, methods: dict, frames: int, size: tuple) -> tuple[list, dict]:
@@ -417,7 +431,7 @@ def tune_realsense(frames: int = 30, size: tuple = (120, 160), grid: Optional[di
             m = synthetic_metrics(o, s, r)
             scores.append((m["rmse"] / ref["rmse"] + m["flicker"] / ref["flicker"], m["rmse"], m["flicker"],
                            m["trail"]))
-        sc = np.mean(scores, 0)
+        sc = _nanmean(scores, 0)  # a tuning sequence without movers has no trail: left out of the trail mean
         out.append(dict(alpha=a, delta=d, persistence=p, score=float(sc[0]), rmse=float(sc[1]),
                         flicker=float(sc[2]), trail=float(sc[3])))
     return sorted(out, key=lambda r: r["score"])
