@@ -410,3 +410,29 @@ def test_trail_of_a_sequence_without_movers_is_nan_and_left_out_of_the_means(mon
     monkeypatch.setattr(track, "regions", no_trail_in_the_first)
     res = track.tune_realsense(frames=16, size=(32, 40), grid=dict(alpha=(0.1,), delta=(50.0,), persistence=(0,)))
     assert len(res) == 1 and np.isfinite(res[0]["trail"]) and np.isfinite(res[0]["rmse"])
+
+
+def _state_tensors(stream):
+    st = stream.state
+    out = [st.depth, st.age, st.evidence, st.mean, st.valid, st.hole, st.confidence, st.spread, st.rgb]
+    return out + list(st.matches or ())
+
+
+def test_to_moves_the_stream_state_with_the_model_and_keeps_its_dtype():
+    # the state is no registered buffer: nn.Module.to would leave it on the old device and the next frame would mix
+    # devices. "meta" stands for another device; the state keeps the frames' compute dtype (cast where it is read)
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(24, 32, seed=0)
+    stream = StreamRestorer(DepthRestorer(num_layers=2))
+    stream.step(s["gt"] + torch.randn_like(s["gt"]), s["rgb"])
+    before = [(t.dtype, t.shape) for t in _state_tensors(stream)]
+    assert stream.state.matches is not None and {t.device.type for t in _state_tensors(stream)} == {"cpu"}
+    stream.double()  # a dtype change: the model's, not the state's
+    assert [(t.dtype, t.shape) for t in _state_tensors(stream)] == before
+    assert stream.step(s["gt"] + torch.randn_like(s["gt"]), s["rgb"]).shape == (1, 24, 32)
+    assert stream.frames == 2
+    stream.to("meta")
+    assert {t.device.type for t in _state_tensors(stream)} == {"meta"}
+    assert {p.device.type for p in stream.parameters()} == {"meta"}
+    assert [(t.dtype, t.shape) for t in _state_tensors(stream)] == before
