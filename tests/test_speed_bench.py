@@ -126,3 +126,14 @@ def test_gpu_report_parts_run_on_any_device():
     assert all(sel[0][how + "_exact"] for how in ("topk", "split", "sort"))
     rows = gpu_report.matching_times("cpu", [(24, 28)], [1, 2], repeats=1)
     assert [r["batch"] for r in rows] == [1, 2] and all(r["seconds"] > 0 for r in rows)
+
+
+def test_default_skip_covers_every_model_method_at_the_largest_batch():
+    # a model method at 1088x1376 batch 8 is too slow on a 2-core CPU: the stream steps as much as full
+    from torch_depth_sr.evaluation.speed import BATCHES, DEFAULT_SKIP, METHODS, MODEL_PRESETS, SIZES
+
+    model_methods = [m for m in METHODS if m in MODEL_PRESETS or m.startswith("stream")]
+    assert {"stream", "stream-fast"} <= set(model_methods)
+    (h, w), b = max(SIZES), max(BATCHES)
+    assert {f"{m}@{h}x{w}x{b}" for m in model_methods} <= set(DEFAULT_SKIP)
+    assert all(tag.split("@")[0] in METHODS for tag in DEFAULT_SKIP)

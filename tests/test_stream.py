@@ -348,3 +348,91 @@ def test_recordings_factory_streams_and_replays(tmp_path):
         expected = stream.step(d, c[None])
         written = cv2.imread(str(tmp_path / "out" / "rec" / "depth" / f"{t:03d}.png"), cv2.IMREAD_UNCHANGED)
         assert np.array_equal(written, expected), t
+
+
+@pytest.mark.parametrize("name", ["frame", "stream", "rs-temporal+frame"])
+@pytest.mark.parametrize("given", [False, True])
+def test_stream_track_methods_run_their_model_on_the_requested_device(name, given):
+    # the colour goes to `device`; the model computes where its parameters are, so it must be moved there too
+    # ("meta" stands for a device other than the CPU: a model on the CPU must leave it)
+    from torch_depth_sr.evaluation.stream import make_method
+
+    model = DepthRestorer(num_layers=1) if given else None
+    method = make_method(name, model, device="meta")
+    devices = {p.device for p in method.model.parameters()} | {b.device for b in method.model.buffers()}
+    assert devices == {torch.device("meta")}
+    if given:
+        assert method.model is model
+
+
+def test_stream_track_method_on_cpu_restores():
+    from torch_depth_sr.evaluation.stream import make_method
+
+    d = np.full((24, 32), 1000, np.uint16)
+    d[5:9, 5:9] = 0
+    method = make_method("stream", DepthRestorer(num_layers=1), device="cpu")
+    assert {p.device for p in method.model.parameters()} == {torch.device("cpu")}
+    for _ in range(2):
+        out = method.step(d, torch.zeros(3, 24, 32))
+    assert out.shape == d.shape
+
+
+def _still_sequence(t=4, h=12, w=16):
+    """A synthetic sequence without movers: its trail region is empty."""
+    gt = np.full((t, 1, h, w), 1000.0, np.float32)
+    return {"gt": gt, "depth": gt.astype(np.uint16), "rgb": np.zeros((t, 3, h, w), np.float32),
+            "moving": np.zeros((t, 1, h, w), bool), "hold_from": 0}
+
+
+def test_trail_of_a_sequence_without_movers_is_nan_and_left_out_of_the_means(monkeypatch):
+    import warnings
+
+    from torch_depth_sr.evaluation import stream as track
+
+    seq = _still_sequence()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no "Mean of empty slice": the empty region is handled, not stumbled on
+        m = track.synthetic_metrics(seq["gt"][:, 0] + 1, seq)
+    assert np.isnan(m["trail"]) and m["rmse"] == pytest.approx(1.0)
+    rows = [{"set": "synthetic", "sequence": n, "method": "raw", "trail": v} for n, v in (("a", m["trail"]),
+                                                                                          ("b", 3.0), ("c", 5.0))]
+    assert track.summarise(rows)[0]["trail"] == 4.0
+    # tune_realsense: one tuning sequence without a trail must not make the mean trail NaN
+    regions = track.regions
+    seen = []
+
+    def no_trail_in_the_first(seq):
+        reg = regions(seq)
+        if not seen:
+            reg["trail"] = np.zeros_like(reg["trail"])
+        seen.append(1)
+        return reg
+    monkeypatch.setattr(track, "regions", no_trail_in_the_first)
+    res = track.tune_realsense(frames=16, size=(32, 40), grid=dict(alpha=(0.1,), delta=(50.0,), persistence=(0,)))
+    assert len(res) == 1 and np.isfinite(res[0]["trail"]) and np.isfinite(res[0]["rmse"])
+
+
+def _state_tensors(stream):
+    st = stream.state
+    out = [st.depth, st.age, st.evidence, st.mean, st.valid, st.hole, st.confidence, st.spread, st.rgb]
+    return out + list(st.matches or ())
+
+
+def test_to_moves_the_stream_state_with_the_model_and_keeps_its_dtype():
+    # the state is no registered buffer: nn.Module.to would leave it on the old device and the next frame would mix
+    # devices. "meta" stands for another device; the state keeps the frames' compute dtype (cast where it is read)
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(24, 32, seed=0)
+    stream = StreamRestorer(DepthRestorer(num_layers=2))
+    stream.step(s["gt"] + torch.randn_like(s["gt"]), s["rgb"])
+    before = [(t.dtype, t.shape) for t in _state_tensors(stream)]
+    assert stream.state.matches is not None and {t.device.type for t in _state_tensors(stream)} == {"cpu"}
+    stream.double()  # a dtype change: the model's, not the state's
+    assert [(t.dtype, t.shape) for t in _state_tensors(stream)] == before
+    assert stream.step(s["gt"] + torch.randn_like(s["gt"]), s["rgb"]).shape == (1, 24, 32)
+    assert stream.frames == 2
+    stream.to("meta")
+    assert {t.device.type for t in _state_tensors(stream)} == {"meta"}
+    assert {p.device.type for p in stream.parameters()} == {"meta"}
+    assert [(t.dtype, t.shape) for t in _state_tensors(stream)] == before

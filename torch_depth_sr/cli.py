@@ -81,6 +81,11 @@ def cmd_restore(args: argparse.Namespace) -> int:
         from .recordings.cli import restore_recordings
 
         return restore_recordings(args)
+    for name, flag in (("stream", "--stream"), ("resume", "--resume")):  # recordings-only flags, else silently ignored
+        if getattr(args, name, False):
+            from .errors import UsageError
+
+            raise UsageError(f"{flag} applies only with --recordings ROOT OUT")
     # ---- end issue 28 ----
     from .restore_files import restore_paths
 

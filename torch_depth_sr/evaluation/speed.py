@@ -25,8 +25,8 @@ variables: ``sizes`` / ``TORCH_DEPTH_SR_SPEED_SIZES`` ("HxW,HxW", e.g. "48x64"),
 ``..._BATCHES`` ("1,8"), ``repeats`` / ``..._REPEATS``, ``methods`` (list), ``isolate`` (subprocess per
 measurement, default True), ``threads`` / ``..._THREADS``, ``max_seconds`` (a method whose warm-up
 took longer than this is not repeated; its warm-up time is reported with ``repeats = 0``),
-``skip`` ("method@HxWxB" entries not to run; default skips batch 8 at 1088×1376 for ``full`` and
-``dictionary``, too slow on a 2-core CPU).
+``skip`` ("method@HxWxB" entries not to run; default skips batch 8 at 1088×1376 for the model methods (``full``,
+``fast``, ``best``, ``full-fast``, ``stream``, ``stream-fast``) and ``dictionary``, too slow on a 2-core CPU).
 """
 from __future__ import annotations
 
@@ -70,7 +70,7 @@ MODEL_PRESETS = {"full": "default", "fast": "fast", "best": "best", "full-fast":
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
 DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "best@1088x1376x8", "full-fast@1088x1376x8",
-                "dictionary@1088x1376x8")
+                "stream@1088x1376x8", "stream-fast@1088x1376x8", "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "nonlocal", "cg")
 POST_STAGES = ("snap", "refine")  # the edge steps and the edge refiner (row["post_stages"])
 

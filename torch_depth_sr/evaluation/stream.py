@@ -20,7 +20,8 @@ pulled-pushed (:func:`~torch_depth_sr.fill.fill_holes`) before they are scored, 
   ground truth and colour never change there (the mean over those pixels; ``flicker_med`` the median);
   ``flicker_step``: the mean absolute frame-to-frame change of the error there (a lasting change counts once);
 * ``trail``: the RMSE over the pixels near moving objects — within 2 px of a mover now or covered by one in the 4
-  frames before (what a temporal filter smears).
+  frames before (what a temporal filter smears); NaN on a sequence without movers (no such pixel), and left out of
+  the means over sequences (:func:`summarise`, :func:`tune_realsense`), which average the sequences that have one.
 
 **Real sequences** (``--sets real``): ``real_sequences/realsense_static_tabletop`` and ``realsense_d435_t265_desk``
 (the first ``--real-frames`` frames, every ``--real-stride``-th pixel), no ground truth; the models run with
@@ -77,15 +78,18 @@ def _model(name: str, device: str):
 class _Method:
     """A restorer of one stream: ``step(depth uint16 (H,W), rgb (3,H,W) float) -> (H,W)``, ``reset()``."""
 
-    def __init__(self, step: Callable, reset: Callable = lambda: None):
-        self.step, self.reset = step, reset
+    def __init__(self, step: Callable, reset: Callable = lambda: None, model: Optional[torch.nn.Module] = None):
+        self.step, self.reset, self.model = step, reset, model
 
 
 def make_method(name: str, model: Optional["DepthRestorer"] = None, fill: str = "all",
                 rs_params: Optional[dict] = None, device: str = "cpu") -> _Method:
-    """The stream restorer ``name`` of :data:`METHODS` (``model``: the DepthRestorer of the model methods)."""
-    from ..model import restore_depth
+    """The stream restorer ``name`` of :data:`METHODS` (``model``: the DepthRestorer of the model methods, default
+    ``DepthRestorer()``; it is moved to ``device``, where the colour goes: the model computes on its own device)."""
+    from ..model import DepthRestorer, restore_depth
 
+    if name in ("rs-temporal+frame", "frame", "stream"):
+        model = (DepthRestorer() if model is None else model).to(device)
     if name == "raw":
         return _Method(lambda d, rgb: d)
     if name in ("rs-temporal", "rs-temporal+frame"):
@@ -101,12 +105,12 @@ def make_method(name: str, model: Optional["DepthRestorer"] = None, fill: str = 
                 return f
             with torch.no_grad():
                 return restore_depth(f, rgb[None].to(device), model=model, fill=fill)
-        return _Method(rs_frame, rs.reset)
+        return _Method(rs_frame, rs.reset, model)
     if name == "frame":
         def frame(d, rgb):
             with torch.no_grad():
                 return restore_depth(d, rgb[None].to(device), model=model, fill=fill)
-        return _Method(frame)
+        return _Method(frame, model=model)
     if name == "stream":
         from ..stream import StreamRestorer
 
@@ -115,7 +119,7 @@ def make_method(name: str, model: Optional["DepthRestorer"] = None, fill: str = 
         def step(d, rgb):
             with torch.no_grad():
                 return stream.step(d, rgb[None].to(device))
-        return _Method(step, stream.reset)
+        return _Method(step, stream.reset, model)
     raise UsageError(f"unknown stream method {name!r}; allowed are {list(METHODS)}")
 
 
@@ -169,7 +173,20 @@ def synthetic_metrics(out: np.ndarray, seq: dict, reg: Optional[dict] = None) ->
     std = es.std(0)
     return {"rmse": float(rmse.mean()), "mae": float(np.abs(e).mean()), "flicker": float(std.mean()),
             "flicker_med": float(np.median(std)), "flicker_step": float(np.abs(np.diff(es, axis=0)).mean()),
-            "trail": float(np.sqrt((e[reg["trail"]] ** 2).mean())), "static_share": float(reg["static"].mean())}
+            "trail": _rms(e[reg["trail"]]), "static_share": float(reg["static"].mean())}
+
+
+def _rms(e: np.ndarray) -> float:
+    """The RMS of ``e``; NaN (documented, no warning) when it is empty: a region with no pixel has no score."""
+    return float(np.sqrt((e ** 2).mean())) if e.size else float("nan")
+
+
+def _nanmean(rows: list, axis: int = 0) -> np.ndarray:
+    """The mean over sequences leaving out non-finite scores (NaN: a sequence with no pixel in a region), as
+    :func:`summarise` does; NaN only where every sequence has none."""
+    a = np.asarray(rows, dtype=np.float64)
+    n = np.isfinite(a).sum(axis)
+    return np.where(n > 0, np.where(np.isfinite(a), a, 0).sum(axis) / np.maximum(n, 1), np.nan)
 
 
 def _synthetic(args, methods: dict, frames: int, size: tuple) -> tuple[list, dict]:
@@ -414,7 +431,7 @@ def tune_realsense(frames: int = 30, size: tuple = (120, 160), grid: Optional[di
             m = synthetic_metrics(o, s, r)
             scores.append((m["rmse"] / ref["rmse"] + m["flicker"] / ref["flicker"], m["rmse"], m["flicker"],
                            m["trail"]))
-        sc = np.mean(scores, 0)
+        sc = _nanmean(scores, 0)  # a tuning sequence without movers has no trail: left out of the trail mean
         out.append(dict(alpha=a, delta=d, persistence=p, score=float(sc[0]), rmse=float(sc[1]),
                         flicker=float(sc[2]), trail=float(sc[3])))
     return sorted(out, key=lambda r: r["score"])

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any, NamedTuple, Optional, Union
 
 import torch
@@ -303,6 +303,23 @@ class StreamRestorer(nn.Module):
         self.fill, self.noise_sigma = fill, noise_sigma
         self.state: Optional[StreamState] = None
         self.frames = 0  # frames since the last reset
+
+    def _apply(self, fn, recurse=True):
+        """``.to(device)``, ``.cuda()``, ``.cpu()`` move the stream's state with the model (the state is no registered
+        buffer, so nn.Module would leave it behind and the next frame would mix devices). The state keeps its dtype:
+        it is the frames' compute dtype (float64 input: float64, else float32), cast where it is read, not the
+        model's, so ``.double()``/``.half()`` move only its device (``fn`` of an empty tensor tells where to)."""
+        out = super()._apply(fn, recurse)
+        st = self.state
+        if st is not None:
+            def move(t):
+                if t is None:
+                    return None
+                if isinstance(t, tuple):
+                    return tuple(move(v) for v in t)
+                return t.to(fn(torch.empty(0, dtype=t.dtype, device=t.device)).device)
+            self.state = StreamState(**{f.name: move(getattr(st, f.name)) for f in fields(st)})
+        return out
 
     def reset(self) -> None:
         """Forget the previous frames: the next frame is restored on its own."""
