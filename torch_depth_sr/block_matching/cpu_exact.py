@@ -236,8 +236,11 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
     bsz = xp.shape[0]
     r, big_r = block_size // 2, search_window // 2
     order, both = symmetric_order(offset_order(search_window, stride, include_self), search_window)
-    # taller bands share more of each mirrored pair's rows; at least one band per thread
-    rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads()))))
+    # taller bands share more of each mirrored pair's rows; at least one band per thread; and a band's lists (what
+    # the insertions touch at random) within ~2 MiB, the size of a core's cache: at 640x480, k = 40, 10 rows rather
+    # than 32 ran the search ~15 % faster (the shifts of the insertions themselves are cheap, a heap did not help)
+    fit = (2 << 20) // (w * topd.shape[-1] * (topd.itemsize + 4))
+    rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads())), fit))
     bands = [(b, h0, min(h, h0 + rows)) for b in range(bsz) for h0 in range(0, h, rows)]
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
