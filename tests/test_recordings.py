@@ -7,7 +7,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -505,9 +504,7 @@ def test_torchrun_two_processes_write_every_frame_once_bit_identical(root, refer
     one-process run."""
     out, log = tmp_path / "out", tmp_path / "log"
     log.mkdir()
-    t0 = time.perf_counter()
     p = _torchrun(_torchrun_script(tmp_path, root, out), {"RECORDINGS_TEST_LOG": str(log)})
-    seconds = time.perf_counter() - t0
     assert p.returncode == 0, p.stderr[-3000:]
     summaries = _summaries(tmp_path)
     assert len(summaries) == 2 and all(s == summaries[0] for s in summaries)
@@ -519,7 +516,6 @@ def test_torchrun_two_processes_write_every_frame_once_bit_identical(root, refer
     assert stepped == sorted(1000 * (s + 1) + k for s, n in enumerate(COUNTS) for k in range(n))
     assert _records(out) == _records(reference) and _outputs(out) == _outputs(reference)
     assert sorted(p.name for p in out.iterdir()) == ["a_folder", "b_tum", "manifest.jsonl", "nested"]
-    print(f"torchrun 2 processes: {sum(COUNTS)} frames in {seconds:.1f} s (wall, with start-up)")
 
 
 def test_torchrun_killed_rank_resumes_to_the_same_manifest(root, reference, tmp_path):
