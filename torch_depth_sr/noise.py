@@ -172,12 +172,13 @@ def quantisation_step(depth: torch.Tensor, observed: torch.Tensor, integer_input
 
 
 def _percentiles(vals: torch.Tensor) -> torch.Tensor:
-    """p1 and p99 of a 1-D tensor in its own dtype (float32 would overflow at 1e200 or flush 1e-300 to 0)."""
+    """p1 and p99 of a 1-D tensor in its own dtype (float32 would overflow at 1e200 or flush 1e-300 to 0); the host
+    path (the device path: :func:`_masked_percentiles`)."""
     dt = torch.float64 if vals.dtype == torch.float64 else torch.float32
     sub = vals if vals.numel() < 16_000_000 else vals[:: max(1, vals.numel() // 1_000_000)]
     q = torch.tensor([0.01, 0.99], dtype=dt)
-    if sub.device.type != "cpu" or sub.numel() < 2 or bool(torch.isnan(sub).any()):
-        return torch.quantile(sub.to(dt), q.to(sub.device)).to(vals.dtype)
+    if sub.numel() < 2 or bool(torch.isnan(sub).any()):
+        return torch.quantile(sub.to(dt), q).to(vals.dtype)
     return _quantiles_by_selection(sub.to(dt).reshape(-1), q).to(vals.dtype)
 
 

@@ -107,15 +107,18 @@ def refresh_fast() -> None:
     outputs = torch.load(HERE / "outputs.pt", weights_only=True)
     model = DepthRestorer.from_preset("fast")
     for kind, name, task in cases():
-        if (kind, name) != ("named", "fast"):
-            continue
-        r = model.restore_with_details(inputs[task], inputs["rgb"])
-        key = f"{kind}/{name}/{task}"
-        outputs[f"{key}/depth"] = r.depth.detach().clone()
-        if task == "denoise":
-            outputs[f"{key}/confidence"] = r.confidence.detach().clone()
-        print(key, file=sys.stderr)
+        if (kind, name) == ("named", "fast"):
+            _store(outputs, f"{kind}/{name}/{task}", model, inputs, task)
     torch.save(outputs, HERE / "outputs.pt")
+
+
+def _store(outputs: dict, key: str, model, inputs: dict, task: str) -> None:
+    """One case's outputs: the depth, and the confidence of denoising."""
+    r = model.restore_with_details(inputs[task], inputs["rgb"])
+    outputs[f"{key}/depth"] = r.depth.detach().clone()
+    if task == "denoise":
+        outputs[f"{key}/confidence"] = r.confidence.detach().clone()
+    print(key, file=sys.stderr)
 
 
 def main() -> None:
@@ -126,13 +129,7 @@ def main() -> None:
     inputs = make_inputs()
     outputs = {}
     for kind, name, task in cases():
-        model = _build_at_046c797(kind, name)
-        r = model.restore_with_details(inputs[task], inputs["rgb"])
-        key = f"{kind}/{name}/{task}"
-        outputs[f"{key}/depth"] = r.depth.detach().clone()
-        if task == "denoise":
-            outputs[f"{key}/confidence"] = r.confidence.detach().clone()
-        print(key, file=sys.stderr)
+        _store(outputs, f"{kind}/{name}/{task}", _build_at_046c797(kind, name), inputs, task)
     torch.save(inputs, HERE / "inputs.pt")
     torch.save(outputs, HERE / "outputs.pt")
     print(f"{len(cases())} cases, {len(outputs)} tensors", file=sys.stderr)
