@@ -20,6 +20,7 @@ import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
 from .native import host_path
+from .window_max import max_filter, min_filter
 
 __all__ = ["refit_to_measurements", "sided_median", "snap_to_sides"]
 
@@ -183,7 +184,7 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
         return x
     b, _, h, w = x.shape
     r = int(radius)
-    near_edge = (F.max_pool2d(x, 5, 1, 2) + F.max_pool2d(-x, 5, 1, 2)) > edge
+    near_edge = (max_filter(x, 5) - min_filter(x, 5)) > edge
     if active is not None:
         near_edge = near_edge & active
     cpu = host_path(x.device)

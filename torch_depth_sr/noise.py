@@ -26,6 +26,7 @@ from __future__ import annotations
 import torch
 
 from .native import host_path
+from .window_max import max_filter
 
 __all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "quantisation_step", "sample_percentiles",
            "white_noise_sigma"]
@@ -114,7 +115,7 @@ def white_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, patch: int = 
     dv = torch.zeros_like(d)
     dh[..., :, 1:-1] = (d[..., :, :-2] - 2 * d[..., :, 1:-1] + d[..., :, 2:]).abs()
     dv[..., 1:-1, :] = (d[..., :-2, :] - 2 * d[..., 1:-1, :] + d[..., 2:, :]).abs()
-    dmax = torch.nn.functional.max_pool2d(torch.maximum(dh, dv), patch, stride=1)
+    dmax = max_filter(torch.maximum(dh, dv), patch, padding=0)
     complete = torch.nn.functional.avg_pool2d(m, patch, stride=1) > 1 - 1e-9
     sd4 = sd.to(d).view(-1, 1, 1, 1)
     # the patches used, as weights (no boolean indexing: batched, and the host never waits for the device)

@@ -37,6 +37,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .band import clamp_between
+from .window_max import max_filter, min_filter
 
 __all__ = ["EdgeRefiner", "REFINER_FEATURES"]
 
@@ -74,8 +75,8 @@ class EdgeRefiner(nn.Module):
     @staticmethod
     def bounds(lowres: torch.Tensor, factor: int) -> tuple[torch.Tensor, torch.Tensor]:
         """The clamp's bounds on the fine grid: min and max of ``lowres`` over the 3×3 cells around each pixel's."""
-        lo = -F.max_pool2d(-lowres, 3, 1, 1)
-        hi = F.max_pool2d(lowres, 3, 1, 1)
+        lo = min_filter(lowres, 3)
+        hi = max_filter(lowres, 3)
         return (F.interpolate(lo, scale_factor=factor, mode="nearest"),
                 F.interpolate(hi, scale_factor=factor, mode="nearest"))
 

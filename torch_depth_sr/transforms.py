@@ -49,6 +49,7 @@ import torch.nn.functional as F
 from ._checks import check_divisible
 from ._inputs import _integer_full_scale, native_array
 from .errors import DepthSRError, DTypeError, ShapeError
+from .window_max import max_filter
 
 if TYPE_CHECKING:
     from .config import RestorerConfig
@@ -269,7 +270,7 @@ def _edge_band(f: torch.Tensor, measured: torch.Tensor, threshold: float, radius
     jump[..., :-1, :] = torch.maximum(jump[..., :-1, :], dy)
     edge = (jump > threshold).to(f.dtype)
     if radius > 0:
-        edge = F.max_pool2d(edge, 2 * radius + 1, stride=1, padding=radius)
+        edge = max_filter(edge, 2 * radius + 1)
     return (edge > 0).reshape(shape) & measured
 
 
@@ -371,8 +372,8 @@ class AddFlyingPixels(_DepthTransform):
         x, shape = _as4d(f)
         m, _ = _as4d(measured)
         big = torch.finfo(f.dtype).max
-        nmax = F.max_pool2d(torch.where(m, x, torch.full_like(x, -big)), 5, stride=1, padding=2).reshape(shape)
-        nmin = -F.max_pool2d(torch.where(m, -x, torch.full_like(x, -big)), 5, stride=1, padding=2).reshape(shape)
+        nmax = max_filter(torch.where(m, x, torch.full_like(x, -big)), 5).reshape(shape)
+        nmin = -max_filter(torch.where(m, -x, torch.full_like(x, -big)), 5).reshape(shape)
         t = p["t"].to(f.device, f.dtype)
         flying = torch.minimum(torch.maximum(t * nmin + (1 - t) * nmax, nmin), nmax)  # rounding-safe
         return torch.where(p["flying"].to(f.device), flying, f)

@@ -34,6 +34,7 @@ from .band import clamp_between
 from .config import OutputHold, UpsamplingConfig
 from .guided_filters import joint_bilateral_upsample
 from .operators import Degradation, degradation_operator
+from .window_max import max_filter
 
 __all__ = ["UpsamplingReference", "bounded_upsample", "hold_to_initial", "plane_residual", "upsample_initial",
            "upsampling_reference"]
@@ -92,7 +93,7 @@ gives the mask's shape and dtype)."""
         jbu = joint_bilateral_upsample(x0_lr, guide, factor, mask=torch.ones_like(observed), radius=c.jbu.radius,
                                        sigma_space=c.jbu.sigma_space, sigma_color=c.jbu.sigma_color,
                                        first_order=c.jbu.first_order)
-    evidence = F.max_pool2d(plane_residual(x0_lr), 3, stride=1, padding=1)
+    evidence = max_filter(plane_residual(x0_lr), 3)
     return UpsamplingReference(x0_lr, bicubic, jbu, evidence)
 
 
@@ -152,7 +153,7 @@ def hold_to_initial(x: torch.Tensor, ref: UpsamplingReference, K: Degradation, c
     :class:`~torch_depth_sr.post_steps.OutputHoldStep`).
     """
     rebuilt = bounded_upsample(ref, K, c, noise=white)
-    own = F.max_pool2d(plane_residual(ref.lowres), 3, stride=1, padding=1) if separate_evidence else ref.evidence
+    own = max_filter(plane_residual(ref.lowres), 3) if separate_evidence else ref.evidence
     evidence = F.interpolate(own, scale_factor=K.scale, mode="nearest")
     n4, w4 = noise.to(x).view(-1, 1, 1, 1), white.to(x).view(-1, 1, 1, 1)
     band = hold.band * w4 + hold.edge * (evidence - hold.edge_threshold * n4).clamp_min(0)

@@ -13,13 +13,13 @@ from dataclasses import replace
 from typing import Optional
 
 import torch
-import torch.nn.functional as F
 
 from ..block_matching import BlockMatches
 from ..block_matching._common import candidates_everywhere, finish
 from ..config import BlockMatchingConfig
 from ..observation import Observation
 from ..stages import BlockMatcher
+from ..window_max import max_filter
 
 __all__ = ["StreamMatcher", "crops", "dilate", "search_radius"]
 
@@ -146,4 +146,4 @@ def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:
     """``mask`` (B,1,H,W) bool grown by a square of ``radius`` px."""
     if radius <= 0:
         return mask
-    return F.max_pool2d(mask.to(torch.float32), 2 * radius + 1, stride=1, padding=radius) > 0
+    return max_filter(mask.to(torch.float32), 2 * radius + 1) > 0
