@@ -63,12 +63,7 @@ def neighbour_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
         >>> int(s[0, 0, 2, 2]), int(s[0, 0, 0, 0]), int(s[0, 0, 1, 1])
         (0, 3, 7)
     """
-    obs, yv, tol_t = _measured(y, observed, tol)
-    count = torch.zeros_like(yv)
-    for dy, dx in _OFFSETS:
-        near = _shifted(obs, dy, dx, False) & ((_shifted(yv, dy, dx, 0.0) - yv).abs() <= tol_t)
-        count = count + near.to(yv.dtype)
-    return count * obs
+    return _Agreement(y, observed, tol).count
 
 
 _OFFSETS = tuple((dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0))
@@ -85,11 +80,32 @@ def _measured(y: torch.Tensor, observed: torch.Tensor, tol) -> Tuple[torch.Tenso
     return obs, torch.where(obs, y, torch.zeros_like(y)), tol_t
 
 
-def _shifted(t: torch.Tensor, dy: int, dx: int, fill) -> torch.Tensor:
-    """``t`` moved so that pixel ``i`` holds its neighbour ``i + (dy, dx)``; ``fill`` outside the image."""
-    h, w = t.shape[-2:]
-    padded = torch.nn.functional.pad(t, (1, 1, 1, 1), value=fill)
-    return padded[..., 1 + dy:1 + dy + h, 1 + dx:1 + dx + w]
+class _Shifts:
+    """The 8-neighbours of every pixel of ``t`` as views of one padded copy: ``shifts(dy, dx)`` holds at pixel
+    ``i`` the value at ``i + (dy, dx)``, ``fill`` outside the image (one pad per plane, not one per neighbour)."""
+
+    def __init__(self, t: torch.Tensor, fill) -> None:
+        self.h, self.w = t.shape[-2:]
+        self.padded = torch.nn.functional.pad(t, (1, 1, 1, 1), value=fill)
+
+    def __call__(self, dy: int, dx: int) -> torch.Tensor:
+        return self.padded[..., 1 + dy:1 + dy + self.h, 1 + dx:1 + dx + self.w]
+
+
+class _Agreement:
+    """Which measured 8-neighbours agree with each measured pixel (within ``tol``): what :func:`neighbour_support`
+    counts and :func:`line_support` reads, computed once when a rule asks for both."""
+
+    def __init__(self, y: torch.Tensor, observed: torch.Tensor, tol) -> None:
+        self.obs, self.yv, self.tol = _measured(y, observed, tol)
+        self.values, self.measured = _Shifts(self.yv, 0.0), _Shifts(self.obs, False)
+        self.agree = {}
+        count = torch.zeros_like(self.yv)
+        for dy, dx in _OFFSETS:
+            a = self.measured(dy, dx) & ((self.values(dy, dx) - self.yv).abs() <= self.tol) & self.obs
+            self.agree[dy, dx] = a
+            count = count + a.to(self.yv.dtype)
+        self.count = count  # 0 where not measured
 
 
 def line_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torch.Tensor]) -> torch.Tensor:
@@ -111,31 +127,42 @@ def line_support(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torc
         >>> bool(s[0, 0, 0, 3]), bool(s[0, 0, 3, 3]), bool(s[0, 0, 1, 5])
         (True, True, False)
     """
-    obs, yv, tol_t = _measured(y, observed, tol)
-    agree, apart, count = {}, {}, torch.zeros_like(yv)
+    return _lines(_Agreement(y, observed, tol))
+
+
+def _lines(g: _Agreement) -> torch.Tensor:
+    """:func:`line_support` from the agreement of the neighbours."""
+    obs, yv, tol_t, count = g.obs, g.yv, g.tol, g.count
     lo = torch.full_like(yv, math.inf)
     hi = torch.full_like(yv, -math.inf)
+    border = _Shifts(torch.zeros_like(obs), True)
+    apart = {}
     for dy, dx in _OFFSETS:
-        yn, on = _shifted(yv, dy, dx, 0.0), _shifted(obs, dy, dx, False)
-        a = on & ((yn - yv).abs() <= tol_t) & obs
-        other = on & ~a
+        yn, on = g.values(dy, dx), g.measured(dy, dx)
+        other = on & ~g.agree[dy, dx]
         lo = torch.where(other, torch.minimum(lo, yn), lo)
         hi = torch.where(other, torch.maximum(hi, yn), hi)
-        agree[dy, dx] = a
-        # a disagreeing neighbour, or the image's end (a line may run along the border)
-        apart[dy, dx] = other | _shifted(torch.zeros_like(obs), dy, dx, True)
-        count = count + a.to(yv.dtype)
+        apart[dy, dx] = other | border(dy, dx)  # a disagreeing neighbour, or the image's end (a line may run along it)
     chain = count >= 2  # the middle of a chain
-    for (dy, dx), a in agree.items():  # the end of a chain: an agreeing neighbour in its middle
-        chain = chain | (a & _shifted(count >= 2, dy, dx, False))
+    middle = _Shifts(chain, False)
+    for (dy, dx), a in g.agree.items():  # the end of a chain: an agreeing neighbour in its middle
+        chain = chain | (a & middle(dy, dx))
     # clearly beyond (two tolerances: a flying pixel near one side of its edge is not); none (lo = inf) is beyond
     beyond = (yv <= lo - 2 * tol_t) | (yv >= hi + 2 * tol_t)
     # thin: other surfaces on two opposite sides (a flying pixel beside a hole has a surface on one side only)
     between = torch.zeros_like(obs)
     for dy, dx in _OFFSETS[:4]:
-        between = between | (apart[dy, dx] & apart[-dy, -dx] & (_shifted(obs, dy, dx, False) | _shifted(obs, -dy, -dx, False)))
+        between = between | (apart[dy, dx] & apart[-dy, -dx] & (g.measured(dy, dx) | g.measured(-dy, -dx)))
     thin = count <= 2  # more agreeing neighbours make a surface (neighbour_support's case), not a line
     return chain & thin & beyond & between & obs
+
+
+def supported_or_line(y: torch.Tensor, observed: torch.Tensor, tol: Union[float, torch.Tensor],
+                      support: int) -> torch.Tensor:
+    """``(neighbour_support(y, observed, tol) >= support) | line_support(y, observed, tol)`` from one look at the
+    neighbours."""
+    g = _Agreement(y, observed, tol)
+    return (g.count >= support) | _lines(g)
 
 
 def _numba_kernel():

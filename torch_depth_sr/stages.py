@@ -20,7 +20,7 @@ from .block_matching._common import candidates_everywhere
 from .config import BlockMatchingConfig, SingularConfig, SolverConfig
 from .observation import Observation
 from .operators import laplacian
-from .singular import detect_singular, line_support, neighbour_support
+from .singular import detect_singular, neighbour_support, supported_or_line
 from .solvers.dct import NeumannPreconditioner
 from .solvers.implicit import cg_solve
 from .state import stage
@@ -114,7 +114,7 @@ def _neighbours(y: torch.Tensor, observed: torch.Tensor, tol: torch.Tensor, c: S
 
 
 def _neighbours_or_line(y: torch.Tensor, observed: torch.Tensor, tol: torch.Tensor, c: SingularConfig) -> torch.Tensor:
-    return _neighbours(y, observed, tol, c) | line_support(y, observed, tol)
+    return supported_or_line(y, observed, tol, c.support)
 
 
 _SUPPORT_RULES = {False: _neighbours, True: _neighbours_or_line}  # by SingularConfig.line_support
