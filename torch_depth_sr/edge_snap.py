@@ -10,6 +10,10 @@ between two surfaces whose colours are told apart moves to its side, a pixel who
 
 Weights: ``exp(−‖c_j − c_i‖₁ / sigma_color)`` (colour in [0, 1], L1 over the channels), times
 ``exp(−|p_j − p_i|² / 2 sigma_space²)`` when ``sigma_space`` is given, over a ``(2 radius + 1)²`` window.
+
+Where it runs: float CPU tensors without gradient take the numba kernels of :mod:`~torch_depth_sr.edge_snap_kernel`
+(several times faster, the same medians); other devices, autograd, other dtypes and ``TORCH_DEPTH_SR_NO_NUMBA`` the
+torch code here (``_sided_median_torch``, ``_refit_torch``), the reference.
 """
 from __future__ import annotations
 
@@ -19,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
-from .native import host_path
+from .native import cpu_kernel, host_path
 from .window_max import max_filter, min_filter
 
 __all__ = ["refit_to_measurements", "sided_median", "snap_to_sides"]
@@ -31,6 +35,15 @@ _ROWS_PER_CHUNK = 64  # bounds the (B, window, rows, W) stacks: 25 × 64 × 2000
 def _colour_weight(distance: torch.Tensor, sigma_color: float) -> torch.Tensor:
     """The colour weight of a neighbour at L1 colour ``distance`` (one kernel for both steps)."""
     return torch.exp(-distance / sigma_color)
+
+
+def _kernel(name: str, x: torch.Tensor, *others: torch.Tensor):
+    """The numba kernel ``name`` when ``x`` is a float CPU tensor and no gradient is needed (of ``x`` or ``others``),
+    else None."""
+    tracked = torch.is_grad_enabled() and any(t.requires_grad for t in (x, *others))
+    if tracked or not host_path(x.device) or x.dtype not in (torch.float32, torch.float64):
+        return None
+    return cpu_kernel("edge_snap_kernel", name)
 
 
 def _weighted_median(values: torch.Tensor, weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -70,13 +83,23 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
     check_4d(x, "x", channels=1)
     check_4d(guide, "guide")
     check_same_hw(x, guide, "x", "guide")
-    b, _, h, w = x.shape
     r = int(radius)
     offsets = [(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)]
     spatial = None
     if sigma_space is not None:
         spatial = torch.tensor([-(dy * dy + dx * dx) / (2.0 * sigma_space ** 2) for dy, dx in offsets],
                                dtype=x.dtype, device=x.device).exp().view(1, -1, 1, 1)
+    kernel = _kernel("sided_median_cpu", x, guide)
+    if kernel is not None:
+        return kernel(x, guide, r, sigma_color, spatial)
+    return _sided_median_torch(x, guide, r, sigma_color, spatial)
+
+
+def _sided_median_torch(x: torch.Tensor, guide: torch.Tensor, r: int, sigma_color: float,
+                        spatial: Optional[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`sided_median` in torch (``spatial``: None or the window's offset weights, (1, n, 1, 1))."""
+    b, _, h, w = x.shape
+    offsets = [(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)]
     xp = F.pad(x, (r, r, r, r))
     # outside the image no vote; near the border the window is cut to its point-symmetric part (an offset votes
     # only if its mirror image is inside too), so that the median of a slanted plane stays the pixel's own value
@@ -194,6 +217,20 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     where = near_edge.nonzero() if cpu else None
     if cpu and where.shape[0] == 0:
         return x
+    pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3] if cpu else None
+    kernel = _kernel("refit_cpu", x, y, guide)
+    if kernel is not None:
+        return kernel(x, y, observed, guide, pixels, r, band, sigma_color)
+    return _refit_torch(x, y, observed, guide, near_edge, pixels, r, band, sigma_color)
+
+
+def _refit_torch(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor,
+                 near_edge: torch.Tensor, pixels: Optional[torch.Tensor], r: int, band: float,
+                 sigma_color: float) -> torch.Tensor:
+    """:func:`refit_to_measurements` in torch at ``pixels`` (flat indices into (B, H, W); None = every pixel, the
+    result kept where ``near_edge``)."""
+    b, _, h, w = x.shape
+    cpu = pixels is not None
     yp = F.pad(torch.where(observed > 0, y, torch.zeros_like(y)), (r, r, r, r)).reshape(-1)
     op = F.pad((observed > 0).to(x.dtype), (r, r, r, r)).reshape(-1)
     gp = F.pad(guide.to(x), (r, r, r, r), mode="replicate")
@@ -204,7 +241,8 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     offsets = torch.tensor([dy * wp + dx for dy in range(-r, r + 1) for dx in range(-r, r + 1)], device=x.device)
     out = x.clone(memory_format=torch.contiguous_format)
     flat_out, flat_x = out.view(-1), x.reshape(-1)
-    pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3] if cpu else torch.arange(b * h * w, device=x.device)
+    if pixels is None:
+        pixels = torch.arange(b * h * w, device=x.device)
     flat_near = near_edge.expand(b, 1, h, w).reshape(-1)
     for start in range(0, pixels.shape[0], _PIXELS_PER_CHUNK):
         flat = pixels[start:start + _PIXELS_PER_CHUNK]

@@ -10,6 +10,7 @@ import torch
 
 from .block_matching import block_match
 from .block_matching.refine import refine_matches
+from .edge_snap import refit_to_measurements, snap_to_sides
 from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
@@ -41,8 +42,13 @@ def _warmup_steps(dtype: torch.dtype):
     def singular():
         detect_singular(x, x, trust, held["m"], sigma_floor=0.1, rounds=2, backend="numba")
 
+    def edges():  # both edge steps as the model calls them (no gradient; the refit finds edge pixels in 10·x)
+        with torch.no_grad():
+            snap_to_sides(x, rgb, rounds=1, radius=2, sigma_space=1.5)
+            refit_to_measurements(10 * x, 10 * x, trust, rgb, radius=2)
+
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
-            ("singular test", singular)]
+            ("singular test", singular), ("edge steps", edges)]
 
 
 def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),

@@ -1,0 +1,194 @@
+"""The windowed weighted medians of the edge steps (``edge_snap.py``): numba kernels, one pixel at a time.
+
+The torch path builds the whole ``(2 r + 1)²`` window of every pixel and sorts it (``sided_median``: every pixel;
+``refit_to_measurements``: the pixels near a depth edge). These kernels keep only the window entries with a positive
+weight (an offset outside the image, or whose mirror is outside, or an unmeasured or out-of-band measurement, weighs
+0 and cannot be the median: the median is the first value whose cumulative weight reaches half the total) and sort
+them by insertion, equal values in window order. No gradient: the torch path serves whenever autograd needs one.
+
+Precision: the weights in the input dtype, as the torch path (``exp`` may differ from torch's by an ulp); the
+cumulative weights summed in float64 and rounded to the input dtype, as torch's CPU ``cumsum``; the shares' sums in
+float64. Medians agree with the torch path as values, except in rare ties at exactly half the total weight; shares to
+the input dtype's round-off. With ``torch.get_num_threads() > 1`` equal shares of the pixels run in parallel
+(:func:`~torch_depth_sr.native.run_tasks`), with one thread on the calling thread. Compiled by LLVM at first use
+and cached on disk (``cache=True``).
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import torch
+from numba import njit
+
+from .native import as_numpy, kernel_threads, run_tasks
+
+__all__ = ["refit_cpu", "sided_median_cpu"]
+
+
+@njit(cache=True, nogil=True)
+def _insert(vals, wts, m, v, w):
+    """Insert ``(v, w)`` into the first ``m`` entries, sorted by value, after the equal values (so that equal values
+    keep the window order); returns ``m + 1``."""
+    k = m
+    while k > 0 and vals[k - 1] > v:
+        vals[k] = vals[k - 1]
+        wts[k] = wts[k - 1]
+        k -= 1
+    vals[k] = v
+    wts[k] = w
+    return m + 1
+
+
+@njit(cache=True, nogil=True)
+def _median(vals, wts, cum, m):
+    """The index of the first of the ``m`` sorted entries whose cumulative weight (rounded to the dtype) reaches
+    half the total, and the total (``-1`` and 0 when ``m == 0``)."""
+    c = 0.0
+    for k in range(m):
+        c += wts[k]
+        cum[k] = c  # rounded to the input dtype, as torch's cumsum
+    if m == 0:
+        return -1, 0.0
+    half = 0.5 * cum[m - 1]
+    for k in range(m):
+        if not cum[k] < half:
+            return k, cum[m - 1]
+    return m - 1, cum[m - 1]
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
+    """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch: ``x`` (B, H, W), ``g`` (1 or B, C, H, W)
+    → ``median``, ``share`` (B, H, W). ``spatial`` holds a weight per window offset (``dy`` outer, ``dx`` inner),
+    or nothing for a flat window."""
+    b, h, w = x.shape
+    nc = g.shape[1]
+    d = 2 * r + 1
+    vals = np.empty(d * d, x.dtype)
+    wts = np.empty(d * d, x.dtype)
+    cum = np.empty(d * d, x.dtype)
+    tiny = np.finfo(x.dtype).tiny
+    for t in range(t0, t1):
+        n = t // (h * w)
+        i = t - n * h * w
+        row = i // w
+        col = i - row * w
+        gn = n if g.shape[0] > 1 else 0
+        xi = x[n, row, col]
+        # the window offsets that vote: the offset and its mirror inside the image
+        ry = min(r, row, h - 1 - row)
+        rx = min(r, col, w - 1 - col)
+        m = 0
+        for dy in range(-ry, ry + 1):
+            for dx in range(-rx, rx + 1):
+                yy = row + dy
+                xx = col + dx
+                dist = abs(g[gn, 0, yy, xx] - g[gn, 0, row, col])
+                for c in range(1, nc):
+                    dist += abs(g[gn, c, yy, xx] - g[gn, c, row, col])
+                wt = np.exp(-dist / sigma)
+                if spatial.shape[0] > 0:
+                    wt = wt * spatial[(dy + r) * d + dx + r]
+                if wt > 0:
+                    m = _insert(vals, wts, m, x[n, yy, xx], wt)
+        k, total = _median(vals, wts, cum, m)
+        if k >= 0:
+            med = vals[k]
+        else:  # no weight (a NaN colour): the torch path's smallest value of the zero-padded window
+            med = xi
+            for dy in range(-r, r + 1):
+                for dx in range(-r, r + 1):
+                    yy = row + dy
+                    xx = col + dx
+                    v = x[n, yy, xx] if 0 <= yy < h and 0 <= xx < w else 0.0
+                    med = min(med, v)
+        side = 0.0
+        for q in range(m):
+            if (med < xi and vals[q] < xi) or (not med < xi and vals[q] > xi):
+                side += wts[q]
+        median[n, row, col] = med
+        share[n, row, col] = side / max(total, tiny)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _refit(t0, t1, pixels, x, yz, obs, g, r, sigma, band, out):
+    """``refit_to_measurements`` at ``pixels[t0:t1]`` (flat indices into (B, H, W)): ``x``, ``yz`` (measurements,
+    0 where unobserved), ``obs`` (1 where observed) (B, H, W), ``g`` (1 or B, C, H, W) → ``out`` (B, H, W) at those
+    pixels."""
+    b, h, w = x.shape
+    nc = g.shape[1]
+    d = 2 * r + 1
+    vals = np.empty(d * d, x.dtype)
+    wts = np.empty(d * d, x.dtype)
+    cum = np.empty(d * d, x.dtype)
+    for t in range(t0, t1):
+        p = pixels[t]
+        n = p // (h * w)
+        i = p - n * h * w
+        row = i // w
+        col = i - row * w
+        gn = n if g.shape[0] > 1 else 0
+        xi = x[n, row, col]
+        m = 0
+        for yy in range(max(0, row - r), min(h, row + r + 1)):
+            for xx in range(max(0, col - r), min(w, col + r + 1)):
+                if not obs[n, yy, xx] > 0:
+                    continue
+                v = yz[n, yy, xx]
+                if not abs(v - xi) <= band:
+                    continue
+                dist = abs(g[gn, 0, yy, xx] - g[gn, 0, row, col])
+                for c in range(1, nc):
+                    dist += abs(g[gn, c, yy, xx] - g[gn, c, row, col])
+                wt = np.exp(-dist / sigma)
+                if wt > 0:
+                    m = _insert(vals, wts, m, v, wt)
+        k, total = _median(vals, wts, cum, m)
+        out[n, row, col] = vals[k] if k >= 0 and total > 1.0 else xi
+
+
+def _np_dtype(x: torch.Tensor):
+    return np.float64 if x.dtype == torch.float64 else np.float32
+
+
+def _split(kernel, total: int, *args) -> None:
+    """``kernel(t0, t1, *args)`` over ``[0, total)``: one equal share per thread, or all on the calling thread."""
+    n = kernel_threads()
+    if n > 1 and total > 1:
+        part = -(-total // n)
+        run_tasks(lambda c: kernel(c * part, min(total, (c + 1) * part), *args), n)
+    elif total > 0:
+        kernel(0, total, *args)
+
+
+def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_color: float,
+                     spatial: Optional[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(median, share)``, each (B,1,H,W), of CPU float tensors ``x`` (B,1,H,W) and ``guide`` (1 or B, C, H, W),
+    without gradient; ``spatial``: None or the ``(2 radius + 1)²`` offset weights in ``x``'s dtype."""
+    b, _, h, w = x.shape
+    dt = _np_dtype(x)
+    xn = as_numpy(x, (b, h, w), dt)
+    gn = as_numpy(guide.to(x.dtype), guide.shape, dt)
+    sp = as_numpy(spatial, (-1,), dt) if spatial is not None else np.zeros(0, dt)
+    median = np.empty((b, h, w), dt)
+    share = np.empty((b, h, w), dt)
+    _split(_sided, b * h * w, xn, gn, sp, int(radius), dt(sigma_color), median, share)
+    return torch.from_numpy(median).view(b, 1, h, w), torch.from_numpy(share).view(b, 1, h, w)
+
+
+def refit_cpu(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide: torch.Tensor, pixels: torch.Tensor,
+              radius: int, band: float, sigma_color: float) -> torch.Tensor:
+    """``x`` with the refitted values at ``pixels`` (flat indices into (B, H, W)), of CPU float tensors: ``x``, ``y``,
+    ``observed`` (B,1,H,W) (``y`` and ``observed`` may broadcast), ``guide`` (1 or B, C, H, W). No gradient."""
+    b, _, h, w = x.shape
+    dt = _np_dtype(x)
+    xn = as_numpy(x, (b, h, w), dt)
+    seen = (observed > 0).expand(b, 1, h, w)
+    yz = as_numpy(torch.where(seen, y.to(x.dtype), torch.zeros((), dtype=x.dtype)), (b, h, w), dt)
+    on = as_numpy(seen.to(x.dtype), (b, h, w), dt)
+    gn = as_numpy(guide.to(x.dtype), guide.shape, dt)
+    out = xn.copy()
+    pn = as_numpy(pixels, (-1,), np.int64)
+    _split(_refit, pn.shape[0], pn, xn, yz, on, gn, int(radius), dt(sigma_color), dt(band), out)
+    return torch.from_numpy(out).view(b, 1, h, w)
