@@ -13,7 +13,7 @@ import torch
 import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
-from .native import host_path
+from .native import cpu_kernel, host_path
 
 __all__ = ["fill_holes", "pull_push", "SidedFill", "fill_holes_sided"]
 
@@ -183,12 +183,16 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
     planes = _FillPlanes(x, conf, filled, guide_rows, ws, wch, dy, dx, h, w, sigma_color, quantiles, gap, min_share)
     if not host_path(depth.device):
         return _fill_every_pixel(planes, gapped, shares, passes, allow_weak)
+    # the numba kernel computes each pass's pixels as _fill_pixels does (no gradient through it)
+    tracked = torch.is_grad_enabled() and (depth.requires_grad or (rgb is not None and rgb.requires_grad))
+    kernel = _kernel() if not tracked and dt in (torch.float32, torch.float64) else None
+    fill_pass = _fill_pixels if kernel is None else kernel
     for _ in range(max(1, passes) + 1):
         todo = ~filled
         if not bool(todo.any()):
             break
         bi, _, yi, xi = torch.nonzero(todo, as_tuple=True)  # (N,)
-        est, c_new, spans, share, ok, weak = _fill_pixels(planes, bi, yi, xi)
+        est, c_new, spans, share, ok, weak = fill_pass(planes, bi, yi, xi)
         if not allow_weak:
             if not bool((ok & ~weak).any()):
                 allow_weak = True
@@ -204,6 +208,12 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
         rest = fill_holes(x, filled.to(dt))
         x = torch.where(filled, x, rest)
     return SidedFill(x, conf, gapped, shares)
+
+
+def _kernel():
+    """The numba kernel of one pass (:func:`~torch_depth_sr.fill_kernel.fill_pixels_cpu`), or None (see
+    :mod:`torch_depth_sr.native`)."""
+    return cpu_kernel("fill_kernel", "fill_pixels_cpu")
 
 
 class _FillPlanes(NamedTuple):
