@@ -52,7 +52,8 @@ def test_warmup_leaves_nothing_for_the_forward_to_compile(scene):
     warmup()  # compiles, or loads what an earlier process compiled
     sigs = native.compiled_signatures()
     for kernel in ("block_matching.cpu_exact._band", "block_matching.cpu_exact._finalize",
-                   "block_matching.refine_cpu._refine", "nonlocal_kernel._pixels", "singular_kernel._pixels"):
+                   "block_matching.refine_cpu._refine", "fill_kernel._pixels", "nonlocal_kernel._pixels",
+                   "singular_kernel._pixels"):
         held = " ".join(sigs.get(kernel, []))
         assert "float32" in held and "float64" in held, (kernel, sigs.get(kernel))
     again = warmup()
