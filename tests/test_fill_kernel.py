@@ -166,6 +166,18 @@ def test_the_kernel_serves_only_without_gradient(monkeypatch):
     assert not calls
 
 
+@pytest.mark.parametrize("quantiles", [(0.25, 0.75), (0.4, 0.6), (0.0, 1.0)])
+def test_other_quantiles_match(monkeypatch, quantiles):
+    """Ranks far from the ends (0.4 of 49 values: the insertion sort) and at them (0, 1)."""
+    y, m, rgb = _case(17, torch.float32, True, True)
+    both = _Both()
+    monkeypatch.setattr(fill, "_kernel", lambda: both)
+    fill_holes_sided(y, m, rgb, **_settings(7, 1.5), quantiles=quantiles)
+    assert sum(int(p[1][2].sum()) for p in both.passes) > 0
+    for p in both.passes:
+        _check_pass(*p)
+
+
 def test_a_large_window_sorts_past_the_insertion_sort(monkeypatch):
     """A 21×21 window holds up to 441 measured values (np.sort instead of the insertion sort)."""
     y, m, rgb = _case(11, torch.float64, True, True, b=1, h=40, w=48)

@@ -187,6 +187,8 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
     tracked = torch.is_grad_enabled() and (depth.requires_grad or (rgb is not None and rgb.requires_grad))
     kernel = _kernel() if not tracked and dt in (torch.float32, torch.float64) else None
     fill_pass = _fill_pixels if kernel is None else kernel
+    if kernel is not None and guide_rows is not None:  # the kernel reads it as one C-contiguous array: copied once
+        planes = planes._replace(guide_rows=guide_rows.contiguous())
     for _ in range(max(1, passes) + 1):
         todo = ~filled
         if not bool(todo.any()):

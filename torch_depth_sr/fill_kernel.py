@@ -9,6 +9,10 @@ them. No gradient: the torch path serves whenever autograd needs one.
 
 Each pixel's values come from its own window only, so the pixels split across threads give the same results for
 any thread count (:func:`~torch_depth_sr.native.run_tasks`; with one thread the loop runs on the calling thread).
+The quantiles and the 2-means are computed where the window's whole range exceeds ``gap`` only (elsewhere its
+quantiles cannot either): ``share`` is 1 there (what ``fill_holes_sided`` stores where there is no gap; the torch
+path returns the unused share of its 2-means split). Ranks near the ends of the measured values (the 0.1 and 0.9
+quantiles) are found by keeping the values up to them from that end, others by sorting.
 Sums are in float64 (the torch path sums in the input dtype); the quantities the torch path stores as tensors
 (the quantiles' rank, the 2-means centres and midpoint, the thirds, the share and the confidence) are rounded to
 the input dtype before they are compared, so the outputs agree with the torch path to the input dtype's
@@ -29,6 +33,7 @@ __all__ = ["fill_pixels_cpu"]
 
 _MIN_SHARE_PIXELS = 256  # pixels per thread below which one thread does the pass (a hand-off costs ~50 µs)
 _INSERTION_MAX = 64  # windows with at most this many measured values are sorted by insertion, larger by np.sort
+_SELECT_MAX = 16  # a rank at most this far from an end is found by keeping that end's values, without a sort
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -37,6 +42,35 @@ def _rnd(v, single):
     if single:
         return np.float64(np.float32(v))
     return v
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _tail(n, k):
+    """How many values :func:`_select` keeps for the rank ``k`` of ``n``: those up to it from the nearer end."""
+    return min(k + 1, n - k)
+
+
+@njit(cache=True, nogil=True)
+def _select(vals, n, k, tail):
+    """The ``k``-th smallest (0-based) of ``vals[:n]``: the ``_tail(n, k)`` smallest (or largest) values are kept
+    sorted in ``tail`` while the values are read once (ranks near an end: a few insertions, mostly one compare)."""
+    m = _tail(n, k)
+    low = k + 1 <= n - k
+    c = 0
+    for i in range(n):
+        v = vals[i]
+        if c == m:  # full: only a value beyond the kept last one enters (and the last one leaves)
+            if (v >= tail[m - 1]) if low else (v <= tail[m - 1]):
+                continue
+            p = m - 1
+        else:
+            p = c
+            c += 1
+        while p > 0 and ((tail[p - 1] > v) if low else (tail[p - 1] < v)):
+            tail[p] = tail[p - 1]
+            p -= 1
+        tail[p] = v
+    return tail[m - 1]
 
 
 @njit(cache=True, fastmath=False, nogil=True)
@@ -56,7 +90,8 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
     cw = np.empty(k2)
     wcw = np.empty(k2)
     mw = np.zeros(k2, dtype=np.bool_)
-    srt = np.empty(k2)  # the measured values, sorted
+    srt = np.empty(k2)  # the measured values (sorted where a rank is far from both ends)
+    tail = np.empty(_SELECT_MAX)
     for t in range(t0, t1):
         b = bi[t]
         y0 = yi[t]
@@ -64,6 +99,8 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
         centre = (b * h + y0) * w + x0
         n = 0
         wcmax = 0.0
+        vmin = 0.0
+        vmax = 0.0
         for j in range(k2):
             yy = y0 + dy[j]
             xx = x0 + dx[j]
@@ -74,77 +111,99 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
             vw[j] = x[f]
             cw[j] = conf[f]
             mw[j] = filled[f] and inside
+            if not mw[j]:  # a hole or outside: none of its weights is read
+                continue
             wc = 1.0
             if has_guide:
                 d2 = 0.0
                 for ch in range(nch):
                     d = np.float64(guide[f, ch]) - np.float64(guide[centre, ch])
                     d2 += d * d
-                wc = np.exp(-d2 * inv_2sc2)
+                if single:  # the torch path's exp is a float32 one too
+                    wc = np.float64(np.exp(np.float32(-d2 * inv_2sc2)))
+                else:
+                    wc = np.exp(-d2 * inv_2sc2)
             wcw[j] = wc
-            if mw[j]:
-                srt[n] = vw[j]
-                n += 1
-                if wc > wcmax:
-                    wcmax = wc
+            srt[n] = vw[j]
+            n += 1
+            if wc > wcmax:
+                wcmax = wc
+            if n == 1 or vw[j] < vmin:
+                vmin = vw[j]
+            if n == 1 or vw[j] > vmax:
+                vmax = vw[j]
         has = n > 0
         is_weak = has_guide and wcmax < match
-        # nearest-rank quantiles of the measured values: rank round((n-1)·q) in the input dtype, half to even
+        # the window spans a gap when the spread of its nearest-rank quantiles exceeds ``gap``; it cannot when the
+        # whole range does not: then neither the quantiles nor the 2-means are needed (share 1, as fill stores it)
+        gapped = has and _rnd(vmax - vmin, single) > gap
         lo = 0.0
         hi = 0.0
-        if has:
-            if n <= _INSERTION_MAX:
-                for i in range(1, n):
-                    key = srt[i]
-                    p = i - 1
-                    while p >= 0 and srt[p] > key:
-                        srt[p + 1] = srt[p]
-                        p -= 1
-                    srt[p + 1] = key
-            else:
-                srt[:n] = np.sort(srt[:n])
-            lo = srt[int(np.rint(_rnd(_rnd(n - 1, single) * qlo, single)))]
-            hi = srt[int(np.rint(_rnd(_rnd(n - 1, single) * qhi, single)))]
-        gapped = has and _rnd(hi - lo, single) > gap
-        # 2-means seeded at the quantiles, two iterations
-        ca = lo
-        cb = hi
         mid = 0.0
-        for _it in range(2):
-            mid = _rnd(ca + cb, single) * 0.5
-            sa = 0.0
-            sb = 0.0
-            na = 0
-            nb = 0
+        top_a = 0.0
+        bottom_b = 0.0
+        pick_b = False
+        sh = 1.0
+        if gapped:
+            # the quantiles: rank round((n-1)·q) in the input dtype, half to even
+            klo = int(np.rint(_rnd(_rnd(n - 1, single) * qlo, single)))
+            khi = int(np.rint(_rnd(_rnd(n - 1, single) * qhi, single)))
+            if max(_tail(n, klo), _tail(n, khi)) <= _SELECT_MAX:  # ranks near the ends: kept tails, no sort
+                lo = _select(srt, n, klo, tail)
+                hi = _select(srt, n, khi, tail)
+            else:
+                if n <= _INSERTION_MAX:
+                    for i in range(1, n):
+                        key = srt[i]
+                        p = i - 1
+                        while p >= 0 and srt[p] > key:
+                            srt[p + 1] = srt[p]
+                            p -= 1
+                        srt[p + 1] = key
+                else:
+                    srt[:n] = np.sort(srt[:n])
+                lo = srt[klo]
+                hi = srt[khi]
+            gapped = _rnd(hi - lo, single) > gap
+        if gapped:
+            # 2-means seeded at the quantiles, two iterations
+            ca = lo
+            cb = hi
+            for _it in range(2):
+                mid = _rnd(ca + cb, single) * 0.5
+                sa = 0.0
+                sb = 0.0
+                na = 0
+                nb = 0
+                for j in range(k2):
+                    if mw[j]:
+                        if vw[j] > mid:
+                            sb += vw[j]
+                            nb += 1
+                        else:
+                            sa += vw[j]
+                            na += 1
+                if na > 0:
+                    ca = _rnd(sa / na, single)
+                if nb > 0:
+                    cb = _rnd(sb / nb, single)
+            third = _rnd(_rnd(cb - ca, single) / 3.0, single)
+            top_a = _rnd(ca + third, single)
+            bottom_b = _rnd(cb - third, single)
+            # the sides' weight masses under the choice weights
+            wa = 0.0
+            wb = 0.0
             for j in range(k2):
                 if mw[j]:
+                    wj = wch[j] if is_weak else wch[j] * wcw[j]
                     if vw[j] > mid:
-                        sb += vw[j]
-                        nb += 1
-                    else:
-                        sa += vw[j]
-                        na += 1
-            if na > 0:
-                ca = _rnd(sa / na, single)
-            if nb > 0:
-                cb = _rnd(sb / nb, single)
-        third = _rnd(_rnd(cb - ca, single) / 3.0, single)
-        top_a = _rnd(ca + third, single)
-        bottom_b = _rnd(cb - third, single)
-        # the sides' weight masses under the choice weights
-        wa = 0.0
-        wb = 0.0
-        for j in range(k2):
-            if mw[j]:
-                wj = wch[j] if is_weak else wch[j] * wcw[j]
-                if vw[j] > mid:
-                    if vw[j] >= bottom_b:
-                        wb += wj
-                elif vw[j] <= top_a:
-                    wa += wj
-        pick_b = wb > wa
-        tot = wa + wb
-        sh = _rnd(max(wa, wb) / (tot if tot > 1e-30 else 1e-30), single)
+                        if vw[j] >= bottom_b:
+                            wb += wj
+                    elif vw[j] <= top_a:
+                        wa += wj
+            pick_b = wb > wa
+            tot = wa + wb
+            sh = _rnd(max(wa, wb) / (tot if tot > 1e-30 else 1e-30), single)
         # the weighted mean of the chosen side (of the whole window when it spans no gap)
         den = 0.0
         sv = 0.0
