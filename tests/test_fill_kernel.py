@@ -166,6 +166,16 @@ def test_the_kernel_serves_only_without_gradient(monkeypatch):
     assert not calls
 
 
+def test_one_guide_for_a_batch(monkeypatch):
+    """A (1,3,H,W) guide for a batch of 2 depths: each sample reads the one guide."""
+    y, m, rgb = _case(23, torch.float32, True, False)
+    both = _Both()
+    monkeypatch.setattr(fill, "_kernel", lambda: both)
+    fill_holes_sided(y, m, rgb[:1], **_settings(7, 1.5))
+    for p in both.passes:
+        _check_pass(*p)
+
+
 @pytest.mark.parametrize("quantiles", [(0.25, 0.75), (0.4, 0.6), (0.0, 1.0)])
 def test_other_quantiles_match(monkeypatch, quantiles):
     """Ranks far from the ends (0.4 of 49 values: the insertion sort) and at them (0, 1)."""

@@ -180,15 +180,14 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
     # (one index tensor instead of four: the same values, several times faster than multi-dimensional indexing)
     guide_rows = None if guide is None else guide.expand(b, -1, h, w).permute(0, 2, 3, 1).reshape(b * h * w, -1)
     allow_weak = guide is None
-    planes = _FillPlanes(x, conf, filled, guide_rows, ws, wch, dy, dx, h, w, sigma_color, quantiles, gap, min_share)
+    planes = _FillPlanes(x, conf, filled, guide_rows, ws, wch, dy, dx, h, w, sigma_color, quantiles, gap, min_share,
+                         guide)
     if not host_path(depth.device):
         return _fill_every_pixel(planes, gapped, shares, passes, allow_weak)
     # the numba kernel computes each pass's pixels as _fill_pixels does (no gradient through it)
     tracked = torch.is_grad_enabled() and (depth.requires_grad or (rgb is not None and rgb.requires_grad))
     kernel = _kernel() if not tracked and dt in (torch.float32, torch.float64) else None
     fill_pass = _fill_pixels if kernel is None else kernel
-    if kernel is not None and guide_rows is not None:  # the kernel reads it as one C-contiguous array: copied once
-        planes = planes._replace(guide_rows=guide_rows.contiguous())
     for _ in range(max(1, passes) + 1):
         todo = ~filled
         if not bool(todo.any()):
@@ -236,6 +235,7 @@ class _FillPlanes(NamedTuple):
     quantiles: tuple
     gap: float
     min_share: float
+    guide: Optional[torch.Tensor] = None  # (1 or B, C, H, W): the guide planes ``guide_rows`` holds, read by the kernel
 
 
 def _fill_pixels(p: _FillPlanes, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> tuple:

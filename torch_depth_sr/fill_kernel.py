@@ -78,7 +78,7 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
             gap, min_share, match, single, est, c_new, spans, share, ok, weak):
     """``fill._fill_pixels`` at pixels ``[t0, t1)`` of the list ``(bi, yi, xi)``.
 
-    ``x``, ``filled``, ``conf`` (B·H·W,) flat planes; ``guide`` (B·H·W, C) the guide's rows (unread unless
+    ``x``, ``filled``, ``conf`` (B·H·W,) flat planes; ``guide`` (1 or B, C, H·W) the guide's planes (unread unless
     ``has_guide``); ``ws``, ``wch``, ``dy``, ``dx`` (K²,) the window (dy outer, dx inner) and its space weights as
     the torch path computes them; ``inv_2sc2`` = 1/(2σ_c²); ``qlo``, ``qhi``, ``gap``, ``min_share``, ``match``
     in the input dtype (``single``: float32). Writes ``est``, ``c_new``, ``share`` (input dtype) and ``spans``,
@@ -86,44 +86,73 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
     """
     k2 = dy.shape[0]
     nch = guide.shape[1]
+    r = 0
+    for j in range(k2):
+        r = max(r, abs(dy[j]), abs(dx[j]))
+    off = np.empty(k2, dtype=np.int64)  # flat offsets of the window in a plane
+    for j in range(k2):
+        off[j] = dy[j] * w + dx[j]
     vw = np.empty(k2)  # the window's values, confidences, colour weights and measured flags, read once
     cw = np.empty(k2)
     wcw = np.empty(k2)
     mw = np.zeros(k2, dtype=np.bool_)
     srt = np.empty(k2)  # the measured values (sorted where a rank is far from both ends)
     tail = np.empty(_SELECT_MAX)
+    gc = np.empty(nch)  # the pixel's colour
     for t in range(t0, t1):
         b = bi[t]
         y0 = yi[t]
         x0 = xi[t]
-        centre = (b * h + y0) * w + x0
+        base = b * h * w
+        centre = y0 * w + x0  # in the plane
+        gb = b if guide.shape[0] > 1 else 0
+        if has_guide:
+            for ch in range(nch):
+                gc[ch] = guide[gb, ch, centre]
+        interior = y0 >= r and y0 < h - r and x0 >= r and x0 < w - r
         n = 0
         wcmax = 0.0
         vmin = 0.0
         vmax = 0.0
+        den0 = 0.0
+        sv0 = 0.0
+        sc0 = 0.0
+        den1 = 0.0
+        sv1 = 0.0
+        sc1 = 0.0
         for j in range(k2):
-            yy = y0 + dy[j]
-            xx = x0 + dx[j]
-            inside = yy >= 0 and yy < h and xx >= 0 and xx < w
-            yc = min(max(yy, 0), h - 1)
-            xc = min(max(xx, 0), w - 1)
-            f = (b * h + yc) * w + xc
-            vw[j] = x[f]
-            cw[j] = conf[f]
-            mw[j] = filled[f] and inside
+            if interior:
+                f = centre + off[j]
+                inside = True
+            else:
+                yy = y0 + dy[j]
+                xx = x0 + dx[j]
+                inside = yy >= 0 and yy < h and xx >= 0 and xx < w
+                f = min(max(yy, 0), h - 1) * w + min(max(xx, 0), w - 1)
+            vw[j] = x[base + f]
+            cw[j] = conf[base + f]
+            mw[j] = filled[base + f] and inside
             if not mw[j]:  # a hole or outside: none of its weights is read
                 continue
             wc = 1.0
             if has_guide:
                 d2 = 0.0
                 for ch in range(nch):
-                    d = np.float64(guide[f, ch]) - np.float64(guide[centre, ch])
+                    d = np.float64(guide[gb, ch, f]) - gc[ch]
                     d2 += d * d
                 if single:  # the torch path's exp is a float32 one too
                     wc = np.float64(np.exp(np.float32(-d2 * inv_2sc2)))
                 else:
                     wc = np.exp(-d2 * inv_2sc2)
             wcw[j] = wc
+            # the weighted mean of the whole window (what a window with no gap takes), with and without the colour
+            u = ws[j] * wc
+            den1 += u
+            sv1 += u * vw[j]
+            sc1 += u * cw[j]
+            den0 += ws[j]
+            sv0 += ws[j] * vw[j]
+            sc0 += ws[j] * cw[j]
             srt[n] = vw[j]
             n += 1
             if wc > wcmax:
@@ -205,21 +234,25 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
             tot = wa + wb
             sh = _rnd(max(wa, wb) / (tot if tot > 1e-30 else 1e-30), single)
         # the weighted mean of the chosen side (of the whole window when it spans no gap)
-        den = 0.0
-        sv = 0.0
-        sc = 0.0
-        for j in range(k2):
-            if mw[j]:
-                if gapped:
+        if not gapped:  # summed while the window was read
+            den = den0 if is_weak else den1
+            sv = sv0 if is_weak else sv1
+            sc = sc0 if is_weak else sc1
+        else:
+            den = 0.0
+            sv = 0.0
+            sc = 0.0
+            for j in range(k2):
+                if mw[j]:
                     if pick_b:
                         if not (vw[j] > mid and vw[j] >= bottom_b):
                             continue
                     elif not (vw[j] <= mid and vw[j] <= top_a):
                         continue
-                u = ws[j] if is_weak else ws[j] * wcw[j]
-                den += u
-                sv += u * vw[j]
-                sc += u * cw[j]
+                    u = ws[j] if is_weak else ws[j] * wcw[j]
+                    den += u
+                    sv += u * vw[j]
+                    sc += u * cw[j]
         dd = den if den > 1e-30 else 1e-30
         c_in = _rnd(sc / dd, single)
         cn = 1.0 if c_in > 0.5 else 0.0
@@ -247,8 +280,9 @@ def fill_pixels_cpu(p, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> 
     xn = as_numpy(p.x, (b * h * w,), np_dt)
     fn = as_numpy(p.filled, (b * h * w,), np.bool_)
     cn = as_numpy(p.conf, (b * h * w,), np_dt)
-    has_guide = p.guide_rows is not None
-    gn = as_numpy(p.guide_rows, tuple(p.guide_rows.shape), np_dt) if has_guide else np.zeros((1, 1), np_dt)
+    has_guide = p.guide is not None
+    gn = (as_numpy(p.guide, (p.guide.shape[0], p.guide.shape[1], h * w), np_dt) if has_guide
+          else np.zeros((1, 1, 1), np_dt))
     ws = as_numpy(p.ws, (-1,), np.float64)  # the torch path's weights (in its dtype), exactly
     wch = as_numpy(p.wch, (-1,), np.float64)
     dyn = as_numpy(p.dy, (-1,), np.int64)
