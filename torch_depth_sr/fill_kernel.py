@@ -31,7 +31,8 @@ from .native import as_numpy, kernel_threads, run_tasks
 
 __all__ = ["fill_pixels_cpu"]
 
-_MIN_SHARE_PIXELS = 256  # pixels per thread below which one thread does the pass (a hand-off costs ~50 µs)
+_MIN_SHARE_PIXELS = 256  # pixels per share below which one thread does the pass (a hand-off costs ~50 µs)
+_SHARES_PER_THREAD = 4
 _INSERTION_MAX = 64  # windows with at most this many measured values are sorted by insertion, larger by np.sort
 _SELECT_MAX = 16  # a rank at most this far from an end is found by keeping that end's values, without a sort
 
@@ -302,8 +303,10 @@ def fill_pixels_cpu(p, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> 
     args = (bn, yn, xin, h, w, xn, fn, cn, gn, has_guide, ws, wch, dyn, dxn, 1.0 / (2.0 * p.sigma_color ** 2),
             float(cast(p.quantiles[0])), float(cast(p.quantiles[1])), float(cast(p.gap)), float(cast(p.min_share)),
             float(cast(_MATCH)), single, est, c_new, spans, share, ok, weak)
-    n = min(kernel_threads(), max(1, total // _MIN_SHARE_PIXELS))
-    if n > 1:  # one equal share of the pixels per thread (_pixels releases the GIL; few hand-offs)
+    threads = kernel_threads()
+    n = min(_SHARES_PER_THREAD * threads, max(1, total // _MIN_SHARE_PIXELS)) if threads > 1 else 1
+    if n > 1:  # a few shares of the pixels per thread (_pixels releases the GIL): a thread that gets no core for a
+        # while (a busy machine) leaves its next shares to the others
         part = -(-total // n)
         run_tasks(lambda c: _pixels(c * part, min(total, (c + 1) * part), *args), n)
     else:  # on the calling thread: no hand-off to a thread pool
