@@ -113,8 +113,8 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
         interior = y0 >= r and y0 < h - r and x0 >= r and x0 < w - r
         n = 0
         wcmax = 0.0
-        vmin = 0.0
-        vmax = 0.0
+        vmin = np.inf
+        vmax = -np.inf
         den0 = 0.0
         sv0 = 0.0
         sc0 = 0.0
@@ -158,10 +158,8 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
             n += 1
             if wc > wcmax:
                 wcmax = wc
-            if n == 1 or vw[j] < vmin:
-                vmin = vw[j]
-            if n == 1 or vw[j] > vmax:
-                vmax = vw[j]
+            vmin = min(vmin, vw[j])
+            vmax = max(vmax, vw[j])
         has = n > 0
         is_weak = has_guide and wcmax < match
         # the window spans a gap when the spread of its nearest-rank quantiles exceeds ``gap``; it cannot when the
