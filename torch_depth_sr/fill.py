@@ -199,12 +199,12 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
                 allow_weak = True
                 continue
             ok = ok & ~weak
-        bi, yi, xi = bi[ok], yi[ok], xi[ok]
-        x[bi, 0, yi, xi] = est[ok]
-        conf[bi, 0, yi, xi] = c_new[ok]
-        gapped[bi, 0, yi, xi] = spans[ok].to(dt)
-        shares[bi, 0, yi, xi] = torch.where(spans, share, torch.ones_like(share))[ok]
-        filled[bi, 0, yi, xi] = True
+        flat = ((bi * h + yi) * w + xi)[ok]  # one index into the (B,1,H,W) planes: several times faster than four
+        x.view(-1)[flat] = est[ok]
+        conf.view(-1)[flat] = c_new[ok]
+        gapped.view(-1)[flat] = spans[ok].to(dt)
+        shares.view(-1)[flat] = torch.where(spans, share, torch.ones_like(share))[ok]
+        filled.view(-1)[flat] = True
     if not bool(filled.all()):
         rest = fill_holes(x, filled.to(dt))
         x = torch.where(filled, x, rest)
