@@ -188,11 +188,10 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
     tracked = torch.is_grad_enabled() and (depth.requires_grad or (rgb is not None and rgb.requires_grad))
     kernel = _kernel() if not tracked and dt in (torch.float32, torch.float64) else None
     fill_pass = _fill_pixels if kernel is None else kernel
+    bi, _, yi, xi = torch.nonzero(~filled, as_tuple=True)  # (N,) the pixels to fill, kept up to date below
     for _ in range(max(1, passes) + 1):
-        todo = ~filled
-        if not bool(todo.any()):
+        if bi.numel() == 0:
             break
-        bi, _, yi, xi = torch.nonzero(todo, as_tuple=True)  # (N,)
         est, c_new, spans, share, ok, weak = fill_pass(planes, bi, yi, xi)
         if not allow_weak:
             if not bool((ok & ~weak).any()):
@@ -205,6 +204,8 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
         gapped.view(-1)[flat] = spans[ok].to(dt)
         shares.view(-1)[flat] = torch.where(spans, share, torch.ones_like(share))[ok]
         filled.view(-1)[flat] = True
+        left = ~ok  # those still unfilled, in the order of nonzero(~filled)
+        bi, yi, xi = bi[left], yi[left], xi[left]
     if not bool(filled.all()):
         rest = fill_holes(x, filled.to(dt))
         x = torch.where(filled, x, rest)
