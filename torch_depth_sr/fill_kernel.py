@@ -141,10 +141,8 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
                 for ch in range(nch):
                     d = np.float64(guide[gb, ch, f]) - gc[ch]
                     d2 += d * d
-                if single:  # the torch path's exp is a float32 one too
-                    wc = np.float64(np.exp(np.float32(-d2 * inv_2sc2)))
-                else:
-                    wc = np.exp(-d2 * inv_2sc2)
+                # in float64 for float32 inputs too: float32's exp of a colour far off is subnormal (slow)
+                wc = np.exp(-d2 * inv_2sc2)
             wcw[j] = wc
             # the weighted mean of the whole window (what a window with no gap takes), with and without the colour
             u = ws[j] * wc
