@@ -1,8 +1,10 @@
 """The numba kernel of the hole fill's passes (fill_kernel.py) against the torch reference (fill._fill_pixels).
 
-Inputs: two slanted planes with a step between them (and a steep ramp, a window on which spans a gap without one) (and a colour guide whose edge is off by a pixel), holes of
-every size: scattered pixels, a band along the step, a block deeper than the window (several passes, then the
-push-pull fallback). Quantized depth makes ties in the quantiles' ranks and the 2-means.
+Inputs: two slanted planes with a step between them, a steep ramp (whose windows span a gap without a step: the
+2-means iterate), a colour guide whose edge is off the depth's by a pixel (and a patch of a colour no neighbour has:
+weak pixels), holes of every size: scattered pixels, a band along the step, blocks deeper than the window (several
+passes). Quantized depth makes ties in the quantiles' ranks and the 2-means. Exact ties between the two sides'
+masses pick a side by each path's summation order: those pixels (share within round-off of 1/2) may differ.
 """
 import pytest
 import torch

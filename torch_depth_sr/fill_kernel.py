@@ -13,7 +13,7 @@ The quantiles and the 2-means are computed where the window's whole range exceed
 quantiles cannot either): ``share`` is 1 there (what ``fill_holes_sided`` stores where there is no gap; the torch
 path returns the unused share of its 2-means split). Ranks near the ends of the measured values (the 0.1 and 0.9
 quantiles) are found by keeping the values up to them from that end, others by sorting.
-Sums are in float64 (the torch path sums in the input dtype); the quantities the torch path stores as tensors
+Sums and the colour weights' exp are in float64 (the torch path works in the input dtype); the quantities the torch path stores as tensors
 (the quantiles' rank, the 2-means centres and midpoint, the thirds, the share and the confidence) are rounded to
 the input dtype before they are compared, so the outputs agree with the torch path to the input dtype's
 round-off. Where two sums tie in exact arithmetic (a hole midway between two sides, one colour everywhere), which
