@@ -178,6 +178,21 @@ def test_one_guide_for_a_batch(monkeypatch):
         _check_pass(*p)
 
 
+@pytest.mark.parametrize("kernel", [True, False])
+def test_inputs_of_any_strides_give_the_same_fill(monkeypatch, kernel):
+    """Transposed (dense, not contiguous) depth, mask and guide: the planes are made contiguous, the fill is that of
+    contiguous inputs."""
+    if not kernel:
+        monkeypatch.setattr(fill, "_kernel", lambda: None)
+    y, m, rgb = _case(29, torch.float32, True, False, h=40, w=40)
+    t = (lambda a: a.transpose(-1, -2).contiguous().transpose(-1, -2))
+    ref = fill_holes_sided(y, m, rgb, **_settings(7, 1.5))
+    assert not t(y).is_contiguous()
+    out = fill_holes_sided(t(y), t(m), t(rgb), **_settings(7, 1.5))
+    for a, r in zip(out, ref):
+        assert torch.equal(a, r)
+
+
 @pytest.mark.parametrize("quantiles", [(0.25, 0.75), (0.4, 0.6), (0.0, 1.0)])
 def test_other_quantiles_match(monkeypatch, quantiles):
     """Ranks far from the ends (0.4 of 49 values: the insertion sort) and at them (0, 1)."""

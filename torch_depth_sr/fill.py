@@ -163,8 +163,10 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
         raise ValueError(f"kernel_size must be an odd int >= 3; got {kernel_size}.")
     b, _, h, w = depth.shape
     dt = depth.dtype
-    known = mask > 0
-    x = torch.where(known, depth, torch.zeros_like(depth))
+    # the planes the passes fill in place, C-contiguous whatever the inputs' strides (the CPU loop writes them through
+    # one flat index, the kernel reads them as flat arrays)
+    known = (mask > 0).contiguous()
+    x = torch.where(known, depth, torch.zeros_like(depth)).contiguous()
     conf = known.to(dt)
     gapped = torch.zeros_like(conf)
     shares = torch.ones_like(conf)
@@ -188,6 +190,8 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
     tracked = torch.is_grad_enabled() and (depth.requires_grad or (rgb is not None and rgb.requires_grad))
     kernel = _kernel() if not tracked and dt in (torch.float32, torch.float64) else None
     fill_pass = _fill_pixels if kernel is None else kernel
+    if kernel is not None and guide is not None:  # the kernel reads the guide's planes as one C-contiguous array
+        planes = planes._replace(guide=guide.contiguous())
     bi, _, yi, xi = torch.nonzero(~filled, as_tuple=True)  # (N,) the pixels to fill, kept up to date below
     for _ in range(max(1, passes) + 1):
         if bi.numel() == 0:
