@@ -11,6 +11,7 @@ import torch
 from .block_matching import block_match
 from .block_matching.refine import refine_matches
 from .edge_snap import refit_to_measurements, snap_to_sides
+from .fill import fill_holes_sided
 from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
@@ -47,8 +48,17 @@ def _warmup_steps(dtype: torch.dtype):
             snap_to_sides(x, rgb, rounds=1, radius=2, sigma_space=1.5)
             refit_to_measurements(10 * x, 10 * x, trust, rgb, radius=2)
 
+    def hole_fill():  # holes of 2×2 and more than 512 of them: the pass runs on the calling thread and on two
+        hole = torch.zeros(2, 1, 40, 40, dtype=torch.bool)
+        hole[..., 1::3, :] = True
+        hole[..., 2::3, ::2] = True
+        depth = torch.rand(2, 1, 40, 40, generator=g, dtype=dtype) * 10
+        with torch.no_grad():
+            fill_holes_sided(depth, (~hole).to(dtype), torch.rand(1, 3, 40, 40, generator=g, dtype=dtype),
+                             kernel_size=7, choice_sigma_space=1.5)
+
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
-            ("singular test", singular), ("edge steps", edges)]
+            ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill)]
 
 
 def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),
