@@ -263,7 +263,7 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
         weak[t] = is_weak
 
 
-def fill_pixels_cpu(p, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> tuple:
+def fill_pixels_cpu(p: tuple, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> tuple:
     """``fill._fill_pixels(p, bi, yi, xi)`` by the kernel: ``(est, c_new, spans, share, ok, weak)``, each (N,).
 
     Args:
