@@ -3,8 +3,9 @@
     python examples/restore_in_dataloader.py --workers 2 --frames 16 --size 240 320 --tier fast
 
 ``--tier`` picks the speed tier by name (``fast``, ``default`` or ``best``; ``DepthRestorer.from_preset``,
-docs/speed.md). The restorer runs once in the main process before the workers start: its compiled kernels (numba)
-are then loaded once, and the workers, forked from it, start with them instead of each loading them again.
+docs/speed.md). The transform runs once on the first sample in the main process before the workers start: the
+compiled kernels (numba) it needs, the hole fill's and the edge steps' included, are then loaded once, and the
+workers, forked from it, start with them instead of each loading them again.
 
 On a GPU, restore after collation instead (batched):
     restore = RestoreDepth(preset="fast", device="cuda"); batch = restore({"depth": depth.cuda(), "rgb": rgb.cuda()})
@@ -12,7 +13,6 @@ On a GPU, restore after collation instead (batched):
 import argparse
 import time
 
-import torch
 from torch.utils.data import DataLoader
 
 from torch_depth_sr.datasets.synthetic import SyntheticScenes
@@ -40,8 +40,8 @@ def main() -> None:
     restore = RestoreDepth(preset=a.tier, keep_input="raw_depth", **overrides)
     ds = SyntheticScenes(n=a.frames, size=tuple(a.size), transform=Compose([Degrade(), restore]))
     t0 = time.perf_counter()  # the time from here includes the warm-up and the workers' start-up
-    if a.workers > 0:  # warm up in the main process: the workers (forked) inherit the loaded kernels
-        restore.restorer(torch.full((1, 1, 16, 16), 100.0), torch.rand(1, 3, 16, 16))
+    if a.workers > 0:  # warm up in the main process on one sample (holes, flying pixels: every kernel runs), so that
+        ds[0]  # the workers, forked from it, inherit the loaded kernels instead of each loading them from numba's cache
     loader = DataLoader(ds, batch_size=1, num_workers=a.workers)
     n, se_in, se_out = 0, 0.0, 0.0
     for b in loader:

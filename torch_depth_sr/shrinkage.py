@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -32,9 +33,9 @@ def _as_threshold(t: float | torch.Tensor, v: torch.Tensor, name: str = "t") -> 
     if isinstance(t, torch.Tensor):
         if t.ndim == 1 and v.ndim > 1 and t.shape[0] == v.shape[0] and t.shape[0] != 1:
             t = t.view((-1,) + (1,) * (v.ndim - 1))  # (B, 1, 1, 1)
-        try:
-            torch.broadcast_shapes(t.shape, v.shape)
-        except RuntimeError:
+        try:  # numpy's rule, the same as torch's: torch.broadcast_shapes imports sympy on its first call (0.9 s)
+            np.broadcast_shapes(tuple(t.shape), tuple(v.shape))
+        except ValueError:
             raise ShapeError(
                 f"threshold {name} of shape {tuple(t.shape)} does not broadcast against v of shape "
                 f"{tuple(v.shape)}; use a float, a 0-d tensor, a per-sample (B,) tensor with B={v.shape[0]}, "
