@@ -53,7 +53,7 @@ _LOG = logging.getLogger("torch_depth_sr")
 KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "edge_snap_kernel", "fill_kernel",
                   "nonlocal_kernel",
                   "singular_kernel")
-COMPILE_SECONDS = 12  # every kernel for one dtype: 10-12 s of CPU (docs/measurements/numba-first-use/)
+COMPILE_SECONDS = 13  # the kernels of a float32 forward: about 13 s of CPU (docs/measurements/numba-first-use/)
 _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per process; not during warmup
 
 
