@@ -7,6 +7,7 @@ then refines the filled values with its regularisers.
 """
 from __future__ import annotations
 
+import functools
 from typing import NamedTuple, Optional
 
 import torch
@@ -219,7 +220,8 @@ def fill_holes_sided(depth: torch.Tensor, mask: torch.Tensor, rgb: Optional[torc
 def _kernel():
     """The numba kernel of one pass (:func:`~torch_depth_sr.fill_kernel.fill_pixels_cpu`), or None (see
     :mod:`torch_depth_sr.native`)."""
-    return cpu_kernel("fill_kernel", "fill_pixels_cpu")
+    kernel = cpu_kernel("fill_kernel", "fill_pixels_cpu")
+    return None if kernel is None else functools.partial(kernel, match=_MATCH)
 
 
 class _FillPlanes(NamedTuple):

@@ -274,12 +274,13 @@ def _pixels(t0, t1, bi, yi, xi, h, w, x, filled, conf, guide, has_guide, ws, wch
         weak[t] = is_weak
 
 
-def fill_pixels_cpu(p: tuple, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor) -> tuple:
+def fill_pixels_cpu(p: tuple, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tensor, match: float) -> tuple:
     """``fill._fill_pixels(p, bi, yi, xi)`` by the kernel: ``(est, c_new, spans, share, ok, weak)``, each (N,).
 
     Args:
         p: the ``fill._FillPlanes`` of a CPU float32/float64 fill (read, not written).
         bi, yi, xi: (N,) int64 pixel coordinates.
+        match: the colour weight above which a neighbour looks like the pixel (``fill._MATCH``).
     """
     b, h, w = p.x.shape[0], p.h, p.w
     single = p.x.dtype == torch.float32
@@ -305,11 +306,9 @@ def fill_pixels_cpu(p: tuple, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tens
     spans = np.empty(total, np.bool_)
     ok = np.empty(total, np.bool_)
     weak = np.empty(total, np.bool_)
-    from .fill import _MATCH
-
     args = (bn, yn, xin, h, w, xn, fn, cn, gn, has_guide, ws, wch, dyn, dxn, 1.0 / (2.0 * p.sigma_color ** 2),
             float(cast(p.quantiles[0])), float(cast(p.quantiles[1])), float(cast(p.gap)), float(cast(p.min_share)),
-            float(cast(_MATCH)), single, est, c_new, spans, share, ok, weak)
+            float(cast(match)), single, est, c_new, spans, share, ok, weak)
     threads = kernel_threads()
     n = min(_SHARES_PER_THREAD * threads, max(1, total // _MIN_SHARE_PIXELS)) if threads > 1 else 1
     if n > 1:  # a few shares of the pixels per thread (_pixels releases the GIL): a thread that gets no core for a
