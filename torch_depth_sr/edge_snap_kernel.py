@@ -10,7 +10,7 @@ Precision: the weights in the input dtype, as the torch path (``exp`` may differ
 cumulative weights summed in float64 and rounded to the input dtype, as torch's CPU ``cumsum``; the shares' sums in
 float64. Medians agree with the torch path as values, except in rare ties at exactly half the total weight; shares to
 the input dtype's round-off. With ``torch.get_num_threads() > 1`` equal shares of the pixels run in parallel
-(:func:`~torch_depth_sr.native.run_tasks`), with one thread on the calling thread. Compiled by LLVM at first use
+(:func:`~torch_depth_sr.native.run_range`), with one thread on the calling thread. Compiled by LLVM at first use
 and cached on disk (``cache=True``).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from numba import njit
 
-from .native import as_numpy, kernel_threads, run_tasks
+from .native import as_numpy, run_range
 
 __all__ = ["refit_cpu", "sided_median_cpu"]
 
@@ -57,13 +57,21 @@ def _median(vals, wts, cum, m):
     return m - 1, cum[m - 1]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _colour_weight(g, gn, row, col, yy, xx, sigma):
+    """``exp(−‖g(yy, xx) − g(row, col)‖₁ / sigma)`` over the channels of sample ``gn`` (``edge_snap._colour_weight``)."""
+    dist = abs(g[gn, 0, yy, xx] - g[gn, 0, row, col])
+    for c in range(1, g.shape[1]):
+        dist += abs(g[gn, c, yy, xx] - g[gn, c, row, col])
+    return np.exp(-dist / sigma)
+
+
 @njit(cache=True, fastmath=False, nogil=True)
 def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
     """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch: ``x`` (B, H, W), ``g`` (1 or B, C, H, W)
     → ``median``, ``share`` (B, H, W). ``spatial`` holds a weight per window offset (``dy`` outer, ``dx`` inner),
     or nothing for a flat window."""
     b, h, w = x.shape
-    nc = g.shape[1]
     d = 2 * r + 1
     vals = np.empty(d * d, x.dtype)
     wts = np.empty(d * d, x.dtype)
@@ -84,10 +92,7 @@ def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
             for dx in range(-rx, rx + 1):
                 yy = row + dy
                 xx = col + dx
-                dist = abs(g[gn, 0, yy, xx] - g[gn, 0, row, col])
-                for c in range(1, nc):
-                    dist += abs(g[gn, c, yy, xx] - g[gn, c, row, col])
-                wt = np.exp(-dist / sigma)
+                wt = _colour_weight(g, gn, row, col, yy, xx, sigma)
                 if spatial.shape[0] > 0:
                     wt = wt * spatial[(dy + r) * d + dx + r]
                 if wt > 0:
@@ -117,7 +122,6 @@ def _refit(t0, t1, pixels, x, yz, obs, g, r, sigma, band, out):
     0 where unobserved), ``obs`` (1 where observed) (B, H, W), ``g`` (1 or B, C, H, W) → ``out`` (B, H, W) at those
     pixels."""
     b, h, w = x.shape
-    nc = g.shape[1]
     d = 2 * r + 1
     vals = np.empty(d * d, x.dtype)
     wts = np.empty(d * d, x.dtype)
@@ -138,10 +142,7 @@ def _refit(t0, t1, pixels, x, yz, obs, g, r, sigma, band, out):
                 v = yz[n, yy, xx]
                 if not abs(v - xi) <= band:
                     continue
-                dist = abs(g[gn, 0, yy, xx] - g[gn, 0, row, col])
-                for c in range(1, nc):
-                    dist += abs(g[gn, c, yy, xx] - g[gn, c, row, col])
-                wt = np.exp(-dist / sigma)
+                wt = _colour_weight(g, gn, row, col, yy, xx, sigma)
                 if wt > 0:
                     m = _insert(vals, wts, m, v, wt)
         k, total = _median(vals, wts, cum, m)
@@ -150,16 +151,6 @@ def _refit(t0, t1, pixels, x, yz, obs, g, r, sigma, band, out):
 
 def _np_dtype(x: torch.Tensor):
     return np.float64 if x.dtype == torch.float64 else np.float32
-
-
-def _split(kernel, total: int, *args) -> None:
-    """``kernel(t0, t1, *args)`` over ``[0, total)``: one equal share per thread, or all on the calling thread."""
-    n = kernel_threads()
-    if n > 1 and total > 1:
-        part = -(-total // n)
-        run_tasks(lambda c: kernel(c * part, min(total, (c + 1) * part), *args), n)
-    elif total > 0:
-        kernel(0, total, *args)
 
 
 def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_color: float,
@@ -173,7 +164,7 @@ def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_co
     sp = as_numpy(spatial, (-1,), dt) if spatial is not None else np.zeros(0, dt)
     median = np.empty((b, h, w), dt)
     share = np.empty((b, h, w), dt)
-    _split(_sided, b * h * w, xn, gn, sp, int(radius), dt(sigma_color), median, share)
+    run_range(_sided, b * h * w, xn, gn, sp, int(radius), dt(sigma_color), median, share)
     return torch.from_numpy(median).view(b, 1, h, w), torch.from_numpy(share).view(b, 1, h, w)
 
 
@@ -190,5 +181,5 @@ def refit_cpu(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide: t
     gn = as_numpy(guide.to(x.dtype), guide.shape, dt)
     out = xn.copy()
     pn = as_numpy(pixels, (-1,), np.int64)
-    _split(_refit, pn.shape[0], pn, xn, yz, on, gn, int(radius), dt(sigma_color), dt(band), out)
+    run_range(_refit, pn.shape[0], pn, xn, yz, on, gn, int(radius), dt(sigma_color), dt(band), out)
     return torch.from_numpy(out).view(b, 1, h, w)

@@ -8,7 +8,7 @@ that side. The torch path gathers ``(N, K²)`` (and ``(N, K², 3)`` for the colo
 them. No gradient: the torch path serves whenever autograd needs one.
 
 Each pixel's values come from its own window only, so the pixels split across threads give the same results for
-any thread count (:func:`~torch_depth_sr.native.run_tasks`; with one thread the loop runs on the calling thread).
+any thread count (:func:`~torch_depth_sr.native.run_range`; with one thread the loop runs on the calling thread).
 The quantiles and the 2-means are computed where the window's whole range exceeds ``gap`` only (elsewhere its
 quantiles cannot either): ``share`` is 1 there (what ``fill_holes_sided`` stores where there is no gap; the torch
 path returns the unused share of its 2-means split). Ranks near the ends of the measured values (the 0.1 and 0.9
@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from numba import njit
 
-from .native import as_numpy, kernel_threads, run_tasks
+from .native import as_numpy, run_range
 
 __all__ = ["fill_pixels_cpu"]
 
@@ -309,12 +309,5 @@ def fill_pixels_cpu(p: tuple, bi: torch.Tensor, yi: torch.Tensor, xi: torch.Tens
     args = (bn, yn, xin, h, w, xn, fn, cn, gn, has_guide, ws, wch, dyn, dxn, 1.0 / (2.0 * p.sigma_color ** 2),
             float(cast(p.quantiles[0])), float(cast(p.quantiles[1])), float(cast(p.gap)), float(cast(p.min_share)),
             float(cast(match)), single, est, c_new, spans, share, ok, weak)
-    threads = kernel_threads()
-    n = min(_SHARES_PER_THREAD * threads, max(1, total // _MIN_SHARE_PIXELS)) if threads > 1 else 1
-    if n > 1:  # a few shares of the pixels per thread (_pixels releases the GIL): a thread that gets no core for a
-        # while (a busy machine) leaves its next shares to the others
-        part = -(-total // n)
-        run_tasks(lambda c: _pixels(c * part, min(total, (c + 1) * part), *args), n)
-    else:  # on the calling thread: no hand-off to a thread pool
-        _pixels(0, total, *args)
+    run_range(_pixels, total, *args, shares=_SHARES_PER_THREAD, min_share=_MIN_SHARE_PIXELS)
     return tuple(torch.from_numpy(a) for a in (est, c_new, spans, share, ok, weak))

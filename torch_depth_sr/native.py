@@ -44,7 +44,7 @@ import torch
 from .errors import DepthSRError
 
 __all__ = ["as_numpy", "compiled_signatures", "cpu_kernel", "device_path_forced", "host_path", "kernel_cache_dir",
-           "kernel_threads", "numba_disabled", "run_tasks"]
+           "kernel_threads", "numba_disabled", "run_range", "run_tasks"]
 
 _FAILED: Optional[str] = None  # why numba is unavailable, once known
 _CONFIGURED = False
@@ -205,6 +205,18 @@ def run_tasks(task: Callable[[int], object], count: int) -> list:
         for f in helpers:
             f.result()  # waits; re-raises a helper's exception
     return results
+
+
+def run_range(kernel: Callable[..., object], total: int, *args, shares: int = 1, min_share: int = 1) -> list:
+    """``kernel(t0, t1, *args)`` over ``[0, total)`` split into contiguous ranges, run by :func:`run_tasks`: ``shares``
+    ranges per thread of :func:`kernel_threads` (more than one lets a thread that gets no core for a while leave its
+    next range to the others), none shorter than ``min_share`` items; one range on the calling thread with one
+    thread. Returns the kernel's results in range order. For kernels whose items are independent of each other, so
+    that the result does not depend on the split."""
+    threads = kernel_threads()
+    n = min(shares * threads, max(1, total // max(1, min_share))) if threads > 1 else 1
+    part = max(1, -(-total // n))
+    return run_tasks(lambda c: kernel(c * part, min(total, (c + 1) * part), *args), -(-total // part) if total else 1)
 
 
 def as_numpy(t: torch.Tensor, shape: Sequence[int], dtype: DTypeLike) -> np.ndarray:

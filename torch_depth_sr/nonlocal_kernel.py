@@ -7,7 +7,7 @@ gather and ~15 passes over it. No gradient: the torch path serves whenever autog
 
 Sums are in float64 (the torch path sums in the input dtype); the outputs agree with the torch path to
 the input dtype's round-off. With ``torch.get_num_threads() > 1`` shares of the pixels run in parallel (the kernel
-releases the GIL; :func:`~torch_depth_sr.native.run_tasks`, not ``numba.prange``, which compiles several times
+releases the GIL; :func:`~torch_depth_sr.native.run_range`, not ``numba.prange``, which compiles several times
 longer), with one thread the loop runs on the calling thread.
 Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from numba import njit
 
-from .native import as_numpy, kernel_threads, run_tasks
+from .native import as_numpy, run_range
 
 __all__ = ["nonlocal_terms_cpu"]
 
@@ -145,14 +145,8 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: t
            else np.zeros((b, 0), np_dt))
     alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
     stats = np.empty((b, 3, h * w), dtype=np_dt)
-    total = b * h * w
-    n = kernel_threads()
-    if n > 1:  # one equal share of the pixels per thread (_pixels releases the GIL; few hand-offs)
-        part = -(-total // n)
-        run_tasks(lambda c: _pixels(c * part, min(total, (c + 1) * part), xn, gn, idxn, wn, w, float(ridge), rsn,
-                                    alpha, stats), n)
-    else:  # on the calling thread: no hand-off to a thread pool
-        _pixels(0, total, xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
+    # one equal share of the pixels per thread (_pixels releases the GIL; few hand-offs), or on the calling thread
+    run_range(_pixels, b * h * w, xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
     st = torch.from_numpy(stats).view(b, 3, h, w)
     a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None
     return a, st[:, 0:1], st[:, 1:2], st[:, 2:3]

@@ -8,7 +8,7 @@ in the previous round are recomputed (the others' statistics are unchanged), and
 ``Q`` changed ends the test. On the CPU neither costs a host synchronisation.
 
 With ``torch.get_num_threads() > 1`` shares of the pixels of a round run in parallel (the kernel releases the
-GIL; :func:`~torch_depth_sr.native.run_tasks`); with one thread the loop runs on the calling thread.
+GIL; :func:`~torch_depth_sr.native.run_range`); with one thread the loop runs on the calling thread.
 
 Sums and the exponent are in float64 whatever the input dtype (the torch path sums in the input dtype),
 so in float32 ``P`` agrees with the torch path to float32 round-off and ``Q`` can differ only where ``P``
@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from numba import njit
 
-from .native import as_numpy, kernel_threads, run_tasks
+from .native import as_numpy, run_range
 
 __all__ = ["singular_rounds_cpu"]
 
@@ -99,13 +99,11 @@ def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, q, p):
     q_next = np.empty(hw, dtype=q.dtype)
     dirty = np.zeros(hw, dtype=np.uint8)
     dirty_next = np.zeros(hw, dtype=np.uint8)
-    n_threads = kernel_threads()
-    chunk = max(-(-hw // n_threads), 1)  # one equal share of the pixels per thread: few hand-offs (GIL) per round
     for n in range(b):
         for r in range(rounds):
             args = (r == 0, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, q[n], q_next, p[n], dirty,
                     dirty_next)
-            changed = sum(run_tasks(lambda c: _pixels(c * chunk, min(hw, (c + 1) * chunk), *args), -(-hw // chunk)))
+            changed = sum(run_range(_pixels, hw, *args))  # one equal share of the pixels per thread
             q[n] = q_next
             dirty, dirty_next = dirty_next, dirty
             if changed == 0:

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from numba import njit
 
-from ..native import kernel_threads, run_tasks
+from ..native import run_range, run_tasks
 from ._common import offset_order, symmetric_order
 
 __all__ = ["block_match_cpu_exact"]
@@ -211,10 +211,7 @@ def finalize(topd: np.ndarray, topi: np.ndarray, search_window: int) -> tuple:
     bsz, h, w, k = topd.shape
     dist = np.empty((bsz, k, h, w), dtype=topd.dtype)
     index = np.empty((bsz, k, h, w), dtype=np.int64)
-    n = kernel_threads()
-    rows = -(-bsz * h // n)  # one equal share of the rows per thread
-    run_tasks(lambda t: _finalize(topd, topi, search_window // 2, dist, index, t * rows, min(bsz * h, (t + 1) * rows)),
-              n)
+    run_range(lambda n0, n1: _finalize(topd, topi, search_window // 2, dist, index, n0, n1), bsz * h)  # rows
     return torch.from_numpy(dist), torch.from_numpy(index)
 
 
