@@ -24,6 +24,9 @@ from .native import as_numpy, run_range
 __all__ = ["nonlocal_terms_cpu"]
 
 
+_CHUNK = 256  # pixels per chunk: the chunk's (k, chunk) scratch stays in a core's L1/L2 cache
+
+
 @njit(cache=True, fastmath=False, nogil=True)
 def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     """α and the statistics of pixels ``[t0, t1)`` of the flattened batch.
@@ -33,89 +36,119 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     of the plane fitted to the matched centres (weighted least squares, ridge on the slope) and the variance
     that of the residuals (see ``nonlocal_prior.nonlocal_terms``). ``g`` and ``alpha`` have 0 channels when α is
     not wanted.
+
+    The pixels go in chunks, each statistic a loop over the chunk's pixels inside a loop over the k matches,
+    without branches, so that LLVM runs it on vectors of pixels; every pixel's sums are taken in the order of
+    its matches, as one pixel at a time would (the same values). Rows and columns come from flat indices by
+    float64 floor, exact for any index below 2^40.
     """
     k = idx.shape[1]
     hw = idx.shape[2]
     with_alpha = g.shape[1] == 2
-    xm = np.empty(k)  # the pixel's matched values, offsets and weights, read once
-    dym = np.empty(k)
-    dxm = np.empty(k)
-    wm = np.empty(k)
-    for t in range(t0, t1):
+    with_range = range_sigma.shape[1] > 0
+    inv_w = 1.0 / width
+    size = _CHUNK
+    xm = np.empty((k, size))  # the chunk's matched values, offsets and weights, read once
+    dym = np.empty((k, size))
+    dxm = np.empty((k, size))
+    wm = np.empty((k, size))
+    acc = np.empty((10, size))  # Σω, x̄, ōy, ōx, then the second moments
+    rows = np.empty(size)  # the chunk's pixels' rows and columns
+    cols = np.empty(size)
+    t = t0
+    while t < t1:
         n = t // hw
-        i = t - n * hw
-        row = i // width
-        col = i - row * width
-        sw = 0.0
-        xb = 0.0
-        oy = 0.0
-        ox = 0.0
-        xi = x[n, i]
-        rs = range_sigma[n, i] if range_sigma.shape[1] > 0 else 0.0
+        i0 = t - n * hw
+        c = min(size, t1 - t, hw - i0)
+        xn = x[n]
+        rsn = range_sigma[n] if with_range else x[n]
+        acc[:, :c] = 0.0
+        sw, xb, oy, ox = acc[0], acc[1], acc[2], acc[3]
+        for u in range(c):
+            rows[u] = np.floor((i0 + u + 0.5) * inv_w)
+            cols[u] = (i0 + u) - rows[u] * width
         for m in range(k):
-            j = idx[n, m, i]
-            wm[m] = wt[n, m, i]
-            xm[m] = x[n, j]
-            if rs > 0.0:
-                r = (xm[m] - xi) / rs
-                wm[m] *= np.exp(-0.5 * r * r)
-            jr = j // width
-            dym[m] = jr - row
-            dxm[m] = j - jr * width - col
-            sw += wm[m]
-            xb += wm[m] * xm[m]
-            oy += wm[m] * dym[m]
-            ox += wm[m] * dxm[m]
-        if sw > 0.0:
-            xb /= sw
-            oy /= sw
-            ox /= sw
-        var = 0.0
-        syy = 0.0
-        sxx = 0.0
-        syx = 0.0
-        syv = 0.0
-        sxv = 0.0
+            im = idx[n, m]
+            wr = wt[n, m]
+            xr, yr, dr, wmr = xm[m], dym[m], dxm[m], wm[m]
+            for u in range(c):
+                j = im[i0 + u]
+                xr[u] = xn[j]
+                jr = np.floor((j + 0.5) * inv_w)
+                yr[u] = jr - rows[u]
+                dr[u] = (j - jr * width) - cols[u]
+            if with_range:
+                for u in range(c):
+                    rs = np.float64(rsn[i0 + u])
+                    r = (xr[u] - xn[i0 + u]) / (rs if rs > 0.0 else 1.0)
+                    wmr[u] = wr[i0 + u] * np.exp(-0.5 * r * r) if rs > 0.0 else wr[i0 + u]
+            else:
+                for u in range(c):
+                    wmr[u] = wr[i0 + u]
+            for u in range(c):
+                w = wmr[u]
+                sw[u] += w
+                xb[u] += w * xr[u]
+                oy[u] += w * yr[u]
+                ox[u] += w * dr[u]
+        for u in range(c):
+            s = sw[u] if sw[u] > 0.0 else 1.0
+            xb[u] = xb[u] / s
+            oy[u] = oy[u] / s
+            ox[u] = ox[u] / s
+        var, syy, sxx, syx, syv, sxv = acc[4], acc[5], acc[6], acc[7], acc[8], acc[9]
         for m in range(k):
-            d = xm[m] - xb
-            ey = dym[m] - oy
-            ex = dxm[m] - ox
-            var += wm[m] * d * d
-            syy += wm[m] * ey * ey
-            sxx += wm[m] * ex * ex
-            syx += wm[m] * ey * ex
-            syv += wm[m] * ey * d
-            sxv += wm[m] * ex * d
-        if sw > 0.0:
-            var /= sw
-            syy /= sw
-            sxx /= sw
-            syx /= sw
-            syv /= sw
-            sxv /= sw
-        if ridge > 0.0:
-            a11 = syy + ridge
-            a22 = sxx + ridge
-            det = a11 * a22 - syx * syx
-            gy = (a22 * syv - syx * sxv) / det
-            gx = (a11 * sxv - syx * syv) / det
-            res = var - 2.0 * (gy * syv + gx * sxv) + gy * gy * syy + 2.0 * gy * gx * syx + gx * gx * sxx
-            xb = xb - (gy * oy + gx * ox)
-            var = res if res > 0.0 else 0.0
-        if sw <= 1e-12:  # no centre left (range weights): no estimate, never passes the variance gate
-            var = np.inf
-        stats[n, 0, i] = xb
-        stats[n, 1, i] = var
-        stats[n, 2, i] = oy * oy + ox * ox
+            xr, yr, dr, wmr = xm[m], dym[m], dxm[m], wm[m]
+            for u in range(c):
+                w = wmr[u]
+                d = xr[u] - xb[u]
+                ey = yr[u] - oy[u]
+                ex = dr[u] - ox[u]
+                var[u] += w * d * d
+                syy[u] += w * ey * ey
+                sxx[u] += w * ex * ex
+                syx[u] += w * ey * ex
+                syv[u] += w * ey * d
+                sxv[u] += w * ex * d
+        s0, s1, s2 = stats[n, 0], stats[n, 1], stats[n, 2]
+        for u in range(c):
+            s = sw[u] if sw[u] > 0.0 else 1.0
+            v = var[u] / s
+            a_yy = syy[u] / s
+            a_xx = sxx[u] / s
+            a_yx = syx[u] / s
+            a_yv = syv[u] / s
+            a_xv = sxv[u] / s
+            xbu = xb[u]
+            if ridge > 0.0:
+                a11 = a_yy + ridge
+                a22 = a_xx + ridge
+                det = a11 * a22 - a_yx * a_yx
+                gy = (a22 * a_yv - a_yx * a_xv) / det
+                gx = (a11 * a_xv - a_yx * a_yv) / det
+                res = v - 2.0 * (gy * a_yv + gx * a_xv) + gy * gy * a_yy + 2.0 * gy * gx * a_yx + gx * gx * a_xx
+                xbu = xbu - (gy * oy[u] + gx * ox[u])
+                v = res if res > 0.0 else 0.0
+            # no centre left (range weights): no estimate, never passes the variance gate
+            s0[i0 + u] = xbu
+            s1[i0 + u] = np.inf if sw[u] <= 1e-12 else v
+            s2[i0 + u] = oy[u] * oy[u] + ox[u] * ox[u]
         if with_alpha:
-            a0 = 0.0
-            a1 = 0.0
+            a0, a1 = acc[0], acc[1]  # Σω and x̄ are written out: reuse their rows
+            a0[:c] = 0.0
+            a1[:c] = 0.0
+            g0, g1 = g[n, 0], g[n, 1]
             for m in range(k):
-                j = idx[n, m, i]
-                a0 += wt[n, m, i] * g[n, 0, j]
-                a1 += wt[n, m, i] * g[n, 1, j]
-            alpha[n, 0, i] = a0
-            alpha[n, 1, i] = a1
+                im = idx[n, m]
+                wr = wt[n, m]
+                for u in range(c):
+                    j = im[i0 + u]
+                    w = wr[i0 + u]
+                    a0[u] += w * g0[j]
+                    a1[u] += w * g1[j]
+            alpha[n, 0, i0:i0 + c] = a0[:c]
+            alpha[n, 1, i0:i0 + c] = a1[:c]
+        t += c
 
 
 def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: torch.Tensor, weight: torch.Tensor,
