@@ -4,7 +4,7 @@ The torch path builds the whole ``(2 r + 1)²`` window of every pixel and sorts 
 ``refit_to_measurements``: the pixels near a depth edge). These kernels keep only the window entries with a positive
 weight (an offset outside the image, or whose mirror is outside, or an unmeasured or out-of-band measurement, weighs
 0 and cannot be the median: the median is the first value whose cumulative weight reaches half the total) and sort
-them by insertion, equal values in window order. No gradient: the torch path serves whenever autograd needs one.
+them (equal values in window order). No gradient: the torch path serves whenever autograd needs one.
 
 Precision: the weights in the input dtype, as the torch path (``exp`` may differ from torch's by an ulp); the
 cumulative weights summed in float64 and rounded to the input dtype, as torch's CPU ``cumsum``; the shares' sums in
@@ -27,17 +27,19 @@ __all__ = ["refit_cpu", "sided_median_cpu"]
 
 
 @njit(cache=True, nogil=True)
-def _insert(vals, wts, m, v, w):
-    """Insert ``(v, w)`` into the first ``m`` entries, sorted by value, after the equal values (so that equal values
-    keep the window order); returns ``m + 1``."""
-    k = m
-    while k > 0 and vals[k - 1] > v:
-        vals[k] = vals[k - 1]
-        wts[k] = wts[k - 1]
-        k -= 1
-    vals[k] = v
-    wts[k] = w
-    return m + 1
+def _sort(window_vals, window_wts, m, vals, wts):
+    """The first ``m`` entries of ``window_vals, window_wts`` sorted by value into ``vals, wts``, equal values in
+    window order: each entry goes to its rank, the count of the values below it and of the equal ones before it.
+    The m² compares are a vector loop without branches; an insertion sort's shifts and mispredicted branches cost
+    more at these window sizes (25 entries: a 320x240 frame's sided median 48-59 -> 41-45 ms, one thread). The
+    values are finite (a NaN depth is a hole before any edge step): a NaN would share a rank with another value."""
+    for q in range(m):
+        v = window_vals[q]
+        rank = 0
+        for p in range(m):
+            rank += (window_vals[p] < v) | ((window_vals[p] == v) & (p < q))
+        vals[rank] = v
+        wts[rank] = window_wts[q]
 
 
 @njit(cache=True, nogil=True)
@@ -73,6 +75,8 @@ def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
     or nothing for a flat window."""
     b, h, w = x.shape
     d = 2 * r + 1
+    window_vals = np.empty(d * d, x.dtype)  # the window's voting entries in window order, then sorted
+    window_wts = np.empty(d * d, x.dtype)
     vals = np.empty(d * d, x.dtype)
     wts = np.empty(d * d, x.dtype)
     cum = np.empty(d * d, x.dtype)
@@ -96,7 +100,10 @@ def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
                 if spatial.shape[0] > 0:
                     wt = wt * spatial[(dy + r) * d + dx + r]
                 if wt > 0:
-                    m = _insert(vals, wts, m, x[n, yy, xx], wt)
+                    window_vals[m] = x[n, yy, xx]
+                    window_wts[m] = wt
+                    m += 1
+        _sort(window_vals, window_wts, m, vals, wts)
         k, total = _median(vals, wts, cum, m)
         if k >= 0:
             med = vals[k]
@@ -123,6 +130,8 @@ def _refit(t0, t1, pixels, x, yz, obs, g, r, sigma, band, out):
     pixels."""
     b, h, w = x.shape
     d = 2 * r + 1
+    window_vals = np.empty(d * d, x.dtype)  # the window's voting entries in window order, then sorted
+    window_wts = np.empty(d * d, x.dtype)
     vals = np.empty(d * d, x.dtype)
     wts = np.empty(d * d, x.dtype)
     cum = np.empty(d * d, x.dtype)
@@ -144,7 +153,10 @@ def _refit(t0, t1, pixels, x, yz, obs, g, r, sigma, band, out):
                     continue
                 wt = _colour_weight(g, gn, row, col, yy, xx, sigma)
                 if wt > 0:
-                    m = _insert(vals, wts, m, v, wt)
+                    window_vals[m] = v
+                    window_wts[m] = wt
+                    m += 1
+        _sort(window_vals, window_wts, m, vals, wts)
         k, total = _median(vals, wts, cum, m)
         out[n, row, col] = vals[k] if k >= 0 and total > 1.0 else xi
 
