@@ -3,8 +3,8 @@
     python examples/restore_in_dataloader.py --workers 2 --frames 16 --size 240 320 --tier fast
 
 ``--tier`` picks the speed tier by name (``fast``, ``default`` or ``best``; ``DepthRestorer.from_preset``,
-docs/speed.md). The transform runs once on the first sample in the main process before the workers start: the
-compiled kernels (numba) it needs, the hole fill's and the edge steps' included, are then loaded once, and the
+docs/speed.md). The main process loads the compiled kernels (numba) before the workers start
+(``torch_depth_sr.warmup``, float32: each kernel once on a tiny input; it compiles them on a fresh install): the
 workers, forked from it, start with them instead of each loading them again.
 
 On a GPU, restore after collation instead (batched):
@@ -13,11 +13,13 @@ On a GPU, restore after collation instead (batched):
 import argparse
 import time
 
+import torch
 from torch.utils.data import DataLoader
 
 from torch_depth_sr.datasets.synthetic import SyntheticScenes
 from torch_depth_sr.degradations import SensorDegradation
 from torch_depth_sr.transforms import Compose, RestoreDepth
+from torch_depth_sr.warmup import warmup
 
 
 class Degrade:
@@ -40,8 +42,8 @@ def main() -> None:
     restore = RestoreDepth(preset=a.tier, keep_input="raw_depth", **overrides)
     ds = SyntheticScenes(n=a.frames, size=tuple(a.size), transform=Compose([Degrade(), restore]))
     t0 = time.perf_counter()  # the time from here includes the warm-up and the workers' start-up
-    if a.workers > 0:  # warm up in the main process on one sample (holes, flying pixels: every kernel runs), so that
-        ds[0]  # the workers, forked from it, inherit the loaded kernels instead of each loading them from numba's cache
+    if a.workers > 0:  # load every kernel in the main process, so that the workers, forked from it, inherit them
+        warmup(dtypes=(torch.float32,))  # instead of each loading them from numba's cache
     loader = DataLoader(ds, batch_size=1, num_workers=a.workers)
     n, se_in, se_out = 0, 0.0, 0.0
     for b in loader:
