@@ -68,11 +68,52 @@ def _colour_weight(g, gn, row, col, yy, xx, sigma):
     return np.exp(-dist / sigma)
 
 
+@njit(cache=True, inline="always")
+def _plane(r, dy, dx):
+    """The plane of :func:`_colour_planes` that holds offset ``(dy, dx)`` (or its mirror ``(−dy, −dx)``)."""
+    if dy < 0 or (dy == 0 and dx < 0):
+        dy, dx = -dy, -dx
+    return dx - 1 if dy == 0 else r + (dy - 1) * (2 * r + 1) + dx + r
+
+
 @njit(cache=True, fastmath=False, nogil=True)
-def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
-    """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch: ``x`` (B, H, W), ``g`` (1 or B, C, H, W)
-    → ``median``, ``share`` (B, H, W). ``spatial`` holds a weight per window offset (``dy`` outer, ``dx`` inner),
-    or nothing for a flat window."""
+def _colour_planes(t0, t1, g, r, sigma, planes):
+    """The colour weights :func:`_colour_weight` of rows ``[t0, t1)`` of the flattened (G, H) guide, for every
+    offset of the half window (``dy > 0``, or ``dy = 0`` and ``dx > 0``): ``planes[n, _plane(r, dy, dx), i, j]``
+    is the weight between pixels ``(i, j)`` and ``(i + dy, j + dx)`` where both lie in the image. The weight is
+    symmetric, bit for bit (|a − b| = |b − a|), so the other half of the window reads the mirrored pixel's plane:
+    half the exponentials, each a loop along a row."""
+    _, nc, h, w = g.shape
+    for t in range(t0, t1):
+        n = t // h
+        i = t - n * h
+        for dy in range(0, r + 1):
+            if i + dy >= h:
+                break
+            for dx in range(-r, r + 1):
+                if dy == 0 and dx <= 0:
+                    continue
+                out = planes[n, _plane(r, dy, dx), i]
+                j0 = max(0, -dx)
+                j1 = min(w, w - dx)
+                a = g[n, 0, i]
+                q = g[n, 0, i + dy]
+                for j in range(j0, j1):
+                    out[j] = abs(q[j + dx] - a[j])
+                for c in range(1, nc):
+                    a = g[n, c, i]
+                    q = g[n, c, i + dy]
+                    for j in range(j0, j1):
+                        out[j] += abs(q[j + dx] - a[j])
+                for j in range(j0, j1):
+                    out[j] = np.exp(-out[j] / sigma)
+
+
+@njit(cache=True, fastmath=False, nogil=True)
+def _sided(t0, t1, x, g, planes, spatial, r, sigma, median, share):
+    """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch: ``x`` (B, H, W), ``g`` (1 or B, C, H, W) and
+    its colour weights ``planes`` (:func:`_colour_planes`) → ``median``, ``share`` (B, H, W). ``spatial`` holds a
+    weight per window offset (``dy`` outer, ``dx`` inner), or nothing for a flat window."""
     b, h, w = x.shape
     d = 2 * r + 1
     window_vals = np.empty(d * d, x.dtype)  # the window's voting entries in window order, then sorted
@@ -86,7 +127,7 @@ def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
         i = t - n * h * w
         row = i // w
         col = i - row * w
-        gn = n if g.shape[0] > 1 else 0
+        gn = n if planes.shape[0] > 1 else 0
         xi = x[n, row, col]
         # the window offsets that vote: the offset and its mirror inside the image
         ry = min(r, row, h - 1 - row)
@@ -96,7 +137,12 @@ def _sided(t0, t1, x, g, spatial, r, sigma, median, share):
             for dx in range(-rx, rx + 1):
                 yy = row + dy
                 xx = col + dx
-                wt = _colour_weight(g, gn, row, col, yy, xx, sigma)
+                if dy == 0 and dx == 0:  # 1, or NaN for a NaN colour, as the torch path
+                    wt = _colour_weight(g, gn, row, col, row, col, sigma)
+                elif dy > 0 or (dy == 0 and dx > 0):
+                    wt = planes[gn, _plane(r, dy, dx), row, col]
+                else:
+                    wt = planes[gn, _plane(r, dy, dx), yy, xx]
                 if spatial.shape[0] > 0:
                     wt = wt * spatial[(dy + r) * d + dx + r]
                 if wt > 0:
@@ -176,7 +222,10 @@ def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_co
     sp = as_numpy(spatial, (-1,), dt) if spatial is not None else np.zeros(0, dt)
     median = np.empty((b, h, w), dt)
     share = np.empty((b, h, w), dt)
-    run_range(_sided, b * h * w, xn, gn, sp, int(radius), dt(sigma_color), median, share)
+    r = int(radius)
+    planes = np.empty((gn.shape[0], 2 * r * (r + 1), h, w), dt)
+    run_range(_colour_planes, gn.shape[0] * h, gn, r, dt(sigma_color), planes)
+    run_range(_sided, b * h * w, xn, gn, planes, sp, r, dt(sigma_color), median, share)
     return torch.from_numpy(median).view(b, 1, h, w), torch.from_numpy(share).view(b, 1, h, w)
 
 
