@@ -62,7 +62,9 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
         c = min(size, t1 - t, hw - i0)
         xn = x[n]
         rsn = range_sigma[n] if with_range else x[n]
-        acc[:, :c] = 0.0
+        for a in range(acc.shape[0]):
+            for u in range(c):
+                acc[a, u] = 0.0
         sw, xb, oy, ox = acc[0], acc[1], acc[2], acc[3]
         for u in range(c):
             rows[u] = np.floor((i0 + u + 0.5) * inv_w)
@@ -135,8 +137,9 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
             s2[i0 + u] = oy[u] * oy[u] + ox[u] * ox[u]
         if with_alpha:
             a0, a1 = acc[0], acc[1]  # Σω and x̄ are written out: reuse their rows
-            a0[:c] = 0.0
-            a1[:c] = 0.0
+            for u in range(c):
+                a0[u] = 0.0
+                a1[u] = 0.0
             g0, g1 = g[n, 0], g[n, 1]
             for m in range(k):
                 im = idx[n, m]
@@ -146,8 +149,9 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
                     w = wr[i0 + u]
                     a0[u] += w * g0[j]
                     a1[u] += w * g1[j]
-            alpha[n, 0, i0:i0 + c] = a0[:c]
-            alpha[n, 1, i0:i0 + c] = a1[:c]
+            for u in range(c):
+                alpha[n, 0, i0 + u] = a0[u]
+                alpha[n, 1, i0 + u] = a1[u]
         t += c
 
 
