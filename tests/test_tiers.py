@@ -42,6 +42,18 @@ def test_a_trained_tier_takes_overrides_and_trainable():
         preset_config("fastest")
 
 
+@pytest.mark.parametrize("name", TIERS)
+def test_every_tier_takes_float64(name, sample):
+    """numpy's default dtype reaches the trained tiers too: a float64 frame runs (the networks in their own float32)
+    and comes back float64, the same restoration as the float32 frame to well under the noise (sigma 3)."""
+    m = DepthRestorer.from_preset(name)
+    y, rgb = sample["depth"][None], sample["rgb"][None]
+    with torch.no_grad():
+        single, double = m(y, rgb), m(y.double(), rgb.double())
+    assert double.dtype == torch.float64 and torch.isfinite(double).all()
+    assert (double - single.double()).abs().median() < 1e-3
+
+
 def test_the_tiers_are_bench_methods(sample):
     from torch_depth_sr.evaluation.methods import TIER_METHODS, run_method
 

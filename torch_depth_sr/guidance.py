@@ -126,12 +126,13 @@ class GuidanceNet(nn.Module):
             nn.init.zeros_(h.bias)
 
     def encode_guide(self, rgb: Optional[torch.Tensor], like: torch.Tensor) -> torch.Tensor:
-        """Colour features ``(B,C,H,W)`` of ``rgb (B,3,H,W)`` in [0,1] (a mid-grey image when None), on the grid
-        and dtype of ``like (B,1,H,W)``."""
+        """Colour features ``(B,C,H,W)`` of ``rgb (B,3,H,W)`` in [0,1] (a mid-grey image when None), on the grid of
+        ``like (B,1,H,W)``, in the network's own dtype: a float64 input runs the float32 network of a shipped model
+        in float32, and :meth:`PreparedGuidance.maps` returns the multipliers in the input's dtype."""
         b, _, h, w = like.shape
         if rgb is None:
             rgb = like.new_full((b, 3, h, w), 0.5)
-        return self.guide(rgb.to(like.dtype) - 0.5)  # (B,C,H,W)
+        return self.guide(rgb.to(self.mix.weight.dtype) - 0.5)  # (B,C,H,W)
 
     @staticmethod
     @torch.no_grad()
