@@ -81,8 +81,9 @@ def cmd_restore(args: argparse.Namespace) -> int:
         from .recordings.cli import restore_recordings
 
         return restore_recordings(args)
-    for name, flag in (("stream", "--stream"), ("resume", "--resume")):  # recordings-only flags, else silently ignored
-        if getattr(args, name, False):
+    recordings_only = (("stream", "--stream"), ("resume", "--resume"), ("max_time_difference", "--max-time-difference"))
+    for name, flag in recordings_only:
+        if getattr(args, name, None) not in (None, False):  # recordings-only flags, else silently ignored
             from .errors import UsageError
 
             raise UsageError(f"{flag} applies only with --recordings ROOT OUT")

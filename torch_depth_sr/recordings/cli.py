@@ -60,7 +60,7 @@ def add_recordings_arguments(parser: argparse.ArgumentParser) -> None:
                    help="restore each sequence as a stream (torch_depth_sr.StreamRestorer: a frame helped by the "
                         "frames before it - less flicker, holes held from a confident past, cheaper frames); "
                         "default: every frame on its own, as restore does. See docs/stream.md")
-    g.add_argument("--max-time-difference", type=_seconds, default=TUM_MAX_DIFFERENCE, metavar="SECONDS",
+    g.add_argument("--max-time-difference", type=_seconds, default=None, metavar="SECONDS",
                    help="TUM depth.txt + rgb.txt: largest time between a depth frame and its colour frame "
                         f"(default {TUM_MAX_DIFFERENCE})")
 
@@ -91,7 +91,7 @@ def restore_recordings(args: argparse.Namespace) -> int:
     try:
         summary = restore_dataset(args.recordings, args.depth, restorer=factory, workers=args.workers,
                                   resume=args.resume, overwrite=args.overwrite, threads=args.threads,
-                                  max_time_difference=args.max_time_difference)
+                                  max_time_difference=_max_time_difference(args))
     except UsageError:
         if rank != 0:  # rank 0's plan, raised on every rank: rank 0 prints it
             return 2
@@ -104,7 +104,8 @@ def restore_recordings(args: argparse.Namespace) -> int:
             f"{s.seconds:.1f} s{by}: {s.written} written, {s.skipped} already done, {s.failed} failed; "
             f"manifest {s.manifest}")
     if s.unmatched:
-        line += f"; {s.unmatched} TUM depth frames had no colour frame within {args.max_time_difference} s (left out)"
+        line += (f"; {s.unmatched} TUM depth frames had no colour frame within {_max_time_difference(args)} s "
+                 "(left out)")
     print(line)
     if s.ok:
         return 0
@@ -114,3 +115,10 @@ def restore_recordings(args: argparse.Namespace) -> int:
         print(f"torch-depth-sr: ... and {len(s.failures) - 20} more failed frames (see the manifest)", file=sys.stderr)
     raise DepthSRError(f"{s.missing} of {s.frames} frames are not restored (see above and {s.manifest}); the others "
                        "were written - fix the inputs and rerun with --resume")
+
+
+def _max_time_difference(args) -> float:
+    """``--max-time-difference``, or its default when not given (None marks "not given": restore without
+    --recordings refuses the flag)."""
+    given = getattr(args, "max_time_difference", None)
+    return TUM_MAX_DIFFERENCE if given is None else given
