@@ -47,8 +47,10 @@ def _offer(d, oid, td, ti, j):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded):
-    """Running top-k for image rows [h0, h1); ``topd/topi`` are (h1-h0, W, k) views of this band.
+def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded, dist, index):
+    """Running top-k for image rows [h0, h1); ``topd/topi`` are (h1-h0, W, k) views of this band: the working lists,
+    read when ``seeded`` and written at the end, unless ``dist`` and ``index`` (k, H, W) are not empty: then the band
+    writes its rows of the final distances and flat indices there instead (what :func:`_finalize` would make).
 
     ``xp, tp`` (Hp, Wp) and ``cp`` (C, Hp, Wp): planes replicate-padded by r, then zero-padded by R.
     ``consts`` = (ρ/C, ρ/(C·b²), 1/b²) in the planes' dtype, so that float32 stays float32 (SIMD width).
@@ -164,6 +166,15 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
                 offer_row(dd, j0, j1, j0, np.int32(oid), rd[i - h0], ri[i - h0], seeded)
             if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
                 offer_row(dd, j0, j1, j0 + dx, np.int32(mid), rd[i + dy - h0], ri[i + dy - h0], seeded)
+    if dist.size > 0:
+        for a in range(h1 - h0):
+            i = h0 + a
+            for m in range(k):
+                for j in range(big_w):
+                    oid = ri[a, m, j]
+                    dist[m, i, j] = rd[a, m, j]
+                    index[m, i, j] = (i + oid // s - big_r) * big_w + (j + oid % s - big_r)
+        return
     for a in range(h1 - h0):
         for j in range(big_w):
             for m in range(k):
@@ -223,27 +234,39 @@ def padded_planes(depth, rgb, trust, r: int, big_r: int):
     return xp, tp, cp, use_t
 
 
-def search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, seeded):
+def search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, seeded,
+           out=None):
     """Run the exact search over the offsets of the ``stride`` lattice into the working lists ``topd/topi``
-    (B, H, W, k); with ``seeded`` they start from the candidates already in them."""
+    (B, H, W, k); with ``seeded`` they start from the candidates already in them. With ``out = (dist, index)``
+    (B, k, H, W) and lists that are not seeded, the bands write the final matches there instead (``topd/topi``
+    unused: pass None)."""
     xp, tp, cp, use_t = planes
     bsz = xp.shape[0]
+    k = out[0].shape[1] if out is not None else topd.shape[-1]
+    if out is None:  # empty outputs tell the kernel to write the working lists
+        dist, index = np.empty((1, k, 0, w), xp.dtype), np.empty((1, k, 0, w), np.int64)
+        out_of = lambda b: (dist[0], index[0])  # noqa: E731
+    else:
+        dist, index = out
+        out_of = lambda b: (dist[b], index[b])  # noqa: E731
+        topd = np.empty((bsz, 0, w, k), xp.dtype)  # of the type of the working lists' views, and empty
+        topi = np.empty((bsz, 0, w, k), np.int32)
     r, big_r = block_size // 2, search_window // 2
     order, both = symmetric_order(offset_order(search_window, stride, include_self), search_window)
     # taller bands share more of each mirrored pair's rows; at least one band per thread; and a band's lists (what
     # the insertions touch at random) within ~2 MiB, the size of a core's cache: at 640x480, k = 40, 10 rows rather
     # than 32 ran the search ~15 % faster (the shifts of the insertions themselves are cheap, a heap did not help)
-    fit = (2 << 20) // (w * topd.shape[-1] * (topd.itemsize + 4))
+    fit = (2 << 20) // (w * k * (xp.itemsize + 4))
     rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads())), fit))
     bands = [(b, h0, min(h, h0 + rows)) for b in range(bsz) for h0 in range(0, h, rows)]
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
                       dtype=xp.dtype)
 
-    def band(n: int) -> None:  # a band writes only its own rows of topd/topi: the bands run in any order
+    def band(n: int) -> None:  # a band writes only its own rows: the bands run in any order
         b, h0, h1 = bands[n]
         _band(xp[b], tp[b], cp[b], use_t, h, w, r, big_r, order, both, consts[b], h0, h1, topd[b, h0:h1],
-              topi[b, h0:h1], seeded)
+              topi[b, h0:h1], seeded, *out_of(b))
 
     run_tasks(band, len(bands))
 
@@ -254,8 +277,8 @@ def block_match_cpu_exact(depth: torch.Tensor, rgb: Optional[torch.Tensor], trus
     """Exact top-k block matches ``(dist, index)``, each (B, k, H, W), by the numba kernel."""
     bsz, _, h, w = depth.shape
     planes = padded_planes(depth, rgb, trust, block_size // 2, search_window // 2)
-    topd = np.empty((bsz, h, w, k), dtype=planes[0].dtype)
-    topi = np.empty((bsz, h, w, k), dtype=np.int32)
-    search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, False)
-    dist, index = finalize(topd, topi, search_window)
-    return dist.to(depth.dtype), index
+    dist = np.empty((bsz, k, h, w), dtype=planes[0].dtype)
+    index = np.empty((bsz, k, h, w), dtype=np.int64)
+    search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, None, None, False,
+           out=(dist, index))
+    return torch.from_numpy(dist).to(depth.dtype), torch.from_numpy(index)

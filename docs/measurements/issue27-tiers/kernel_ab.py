@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import re
 import subprocess
 import sys
 import tempfile
@@ -35,9 +36,8 @@ def load_before(commit: str, rel: str, tmp: Path):
     src = subprocess.run(["git", "show", f"{commit}:torch_depth_sr/{rel}"], cwd=ROOT, check=True,
                          capture_output=True, text=True).stdout
     pkg = "torch_depth_sr.block_matching" if "/" in rel else "torch_depth_sr"
-    src = src.replace("from ..native import", "from torch_depth_sr.native import")
-    src = src.replace("from ._common import", f"from {pkg}._common import")
-    src = src.replace("from .native import", "from torch_depth_sr.native import")
+    src = re.sub(r"^from \.\.(\w)", r"from torch_depth_sr.\1", src, flags=re.M)  # relative imports made absolute
+    src = re.sub(r"^from \.(\w)", rf"from {pkg}.\1", src, flags=re.M)
     src = src.replace("cache=True", "cache=False")
     path = tmp / f"before_{Path(rel).stem}.py"
     path.write_text(src)
