@@ -49,6 +49,18 @@ class TestBlockMatchAgainstReference:
         fast = block_match(x, c, t, chunk_rows=4, backend=backend, **kw)
         assert_same_matches(fast, ref, 1e-5 if dtype == torch.float32 else 1e-10)
 
+    @pytest.mark.parametrize("backend", BACKENDS)
+    @pytest.mark.parametrize("h,w,window", [(3, 3, 15), (5, 4, 15), (4, 6, 21), (3, 9, 7), (9, 3, 21)])
+    def test_window_larger_than_the_image(self, backend, h, w, window):
+        """Offsets that reach past the whole image (|dx| >= W): a row of such an offset has no candidate at all (the
+        rank-major lists once sliced it with a negative end and read outside the row)."""
+        x, c, t = _inputs(b=2, h=h, w=w, seed=h * w)
+        kw = dict(block_size=3, search_window=window, k=min(8, h * w - 1), color_weight=0.7)
+        ref = block_match_reference(x, c, t, **kw)
+        fast = block_match(x, c, t, backend=backend, **kw)
+        assert_same_matches(fast, ref, 1e-5)
+        assert int(fast.index.min()) >= 0 and int(fast.index.max()) < h * w
+
     @pytest.mark.parametrize("backend", ["auto"] + BACKENDS)
     def test_default_sizes(self, backend):
         x, c, t = _inputs(b=1, h=22, w=25, seed=1)

@@ -50,8 +50,8 @@ _FAILED: Optional[str] = None  # why numba is unavailable, once known
 _CONFIGURED = False
 _LOG = logging.getLogger("torch_depth_sr")
 # the kernel modules (under torch_depth_sr) whose numba functions warmup compiles and the notice watches
-KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.rank_lists", "block_matching.refine_cpu",
-                  "edge_snap_kernel", "fill_kernel", "nonlocal_kernel", "singular_kernel")
+KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "edge_snap_kernel", "fill_kernel",
+                  "nonlocal_kernel", "singular_kernel")
 COMPILE_SECONDS = 13  # the kernels of a float32 forward: about 13 s of CPU (docs/measurements/numba-first-use/)
 _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per process; not during warmup
 

@@ -19,8 +19,7 @@ Layout of the package:
 
 * ``_common.py`` — the result type, argument checks, offset ids and weights;
 * ``reference.py`` — :func:`block_match_reference`, the unfold oracle (tests, small images);
-* ``cpu_exact.py`` — the exact search on the CPU, a numba kernel (running top-k over the window), its lists kept
-  by ``rank_lists.py``;
+* ``cpu_exact.py`` — the exact search on the CPU, a numba kernel (running top-k over the window);
 * ``torch_search.py`` — the exact search on any device, in torch (GPU; CPU when numba is missing);
 * ``refine.py`` / ``refine_cpu.py`` — :func:`refine_matches`, the re-matching search: the previous matches,
   optionally the neighbours' (PatchMatch propagation) and the window's offsets on a lattice, ranked exactly.
