@@ -30,21 +30,6 @@ __all__ = ["block_match_cpu_exact"]
 _ID_NONE = np.int32(0x7FFFFFFF)
 
 
-@njit(cache=True, inline="always")
-def _offer(d, oid, td, ti, j):
-    """Insert ``(d, oid)`` into the sorted list ``td[j], ti[j]`` of length k if it beats the last entry."""
-    k = td.shape[1]
-    if d > td[j, k - 1] or (d == td[j, k - 1] and oid >= ti[j, k - 1]):
-        return
-    m = k - 1
-    while m > 0 and (td[j, m - 1] > d or (td[j, m - 1] == d and ti[j, m - 1] > oid)):
-        td[j, m] = td[j, m - 1]
-        ti[j, m] = ti[j, m - 1]
-        m -= 1
-    td[j, m] = d
-    ti[j, m] = oid
-
-
 # ---- the running top-k lists of a band of rows, rank-major: a row's lists are (k, W) arrays, rank m of every pixel of
 # the row contiguous, so that offering a row of candidate distances (one offset of the window) is a few vector loops.
 # They live in this file with _band, which calls them: numba's on-disk cache of a function is invalidated only by a
@@ -281,15 +266,6 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
             for m in range(k):
                 topd[a, j, m] = rd[a, m, j]
                 topi[a, j, m] = ri[a, m, j]
-
-
-@njit(cache=True, inline="always")
-def _listed(oid, ti, j):
-    """Whether offset ``oid`` is already in the list ``ti[j]`` (lists seeded with other candidates)."""
-    for m in range(ti.shape[1]):
-        if ti[j, m] == oid:
-            return True
-    return False
 
 
 def _pad(planes: torch.Tensor, r: int, big_r: int, dtype) -> np.ndarray:

@@ -14,9 +14,35 @@ import torch
 from numba import njit, prange
 
 from ..native import kernel_threads
-from .cpu_exact import _ID_NONE, _listed, _offer, finalize, padded_planes, search
+from .cpu_exact import _ID_NONE, finalize, padded_planes, search
 
 __all__ = ["refine_cpu"]
+
+
+# The pixel-major top-k list of the re-ranking (the exact search keeps rank-major lists). Kept in this file with
+# _refine, which inlines them: numba's disk cache of _refine is invalidated only by a change of this file.
+@njit(cache=True, inline="always")
+def _offer(d, oid, td, ti, j):
+    """Insert ``(d, oid)`` into the sorted list ``td[j], ti[j]`` of length k if it beats the last entry."""
+    k = td.shape[1]
+    if d > td[j, k - 1] or (d == td[j, k - 1] and oid >= ti[j, k - 1]):
+        return
+    m = k - 1
+    while m > 0 and (td[j, m - 1] > d or (td[j, m - 1] == d and ti[j, m - 1] > oid)):
+        td[j, m] = td[j, m - 1]
+        ti[j, m] = ti[j, m - 1]
+        m -= 1
+    td[j, m] = d
+    ti[j, m] = oid
+
+
+@njit(cache=True, inline="always")
+def _listed(oid, ti, j):
+    """Whether offset ``oid`` is already in the list ``ti[j]`` (lists seeded with other candidates)."""
+    for m in range(ti.shape[1]):
+        if ti[j, m] == oid:
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")
