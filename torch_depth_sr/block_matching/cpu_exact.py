@@ -36,8 +36,15 @@ _ID_NONE = np.int32(0x7FFFFFFF)
 # change of its own source file, and _band's compiled code contains them.
 @njit(cache=True, inline="always")
 def _beats(d, oid, e, eid):
-    """Whether key ``(d, oid)`` sorts before ``(e, eid)``."""
+    """Whether key ``(d, oid)`` sorts before ``(e, eid)`` (short-circuit: for the column-by-column insertion)."""
     return d < e or (d == e and oid < eid)
+
+
+@njit(cache=True, inline="always")
+def _beats_vector(d, oid, e, eid):
+    """:func:`_beats` without branches, for the loops over a row that LLVM vectorises. Not for the column-by-column
+    insertion: there this form made the k = 40 search about 40 % slower than the short-circuit one."""
+    return (d < e) | ((d == e) & (oid < eid))
 
 
 @njit(cache=True, nogil=True)
@@ -45,9 +52,7 @@ def _count_beating(dv, last_d, last_i, oid):
     """How many of ``dv[j]`` (with id ``oid``) beat the k-th entries ``last_d[j], last_i[j]`` (a vector loop)."""
     n = 0
     for j in range(dv.shape[0]):
-        d = dv[j]
-        e = last_d[j]
-        n += (d < e) | ((d == e) & (oid < last_i[j]))
+        n += _beats_vector(dv[j], oid, last_d[j], last_i[j])
     return n
 
 
@@ -81,8 +86,8 @@ def _merge_rank(dv, cd, ci, pd, pi, oid):
         c_id = ci[j]
         p = pd[j]
         p_id = pi[j]
-        above = (d < p) | ((d == p) & (oid < p_id))
-        here = (d < c) | ((d == c) & (oid < c_id))
+        above = _beats_vector(d, oid, p, p_id)
+        here = _beats_vector(d, oid, c, c_id)
         cd[j] = p if above else (d if here else c)
         ci[j] = p_id if above else (oid if here else c_id)
 
@@ -94,7 +99,7 @@ def _merge_first(dv, cd, ci, oid):
         d = dv[j]
         c = cd[j]
         c_id = ci[j]
-        here = (d < c) | ((d == c) & (oid < c_id))
+        here = _beats_vector(d, oid, c, c_id)
         cd[j] = d if here else c
         ci[j] = oid if here else c_id
 
