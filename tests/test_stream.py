@@ -267,6 +267,28 @@ def test_stream_settings_are_checked():
     assert s.settings.max_frames == 4
 
 
+def test_a_frame_with_a_previous_one_runs_the_first_layers_setting():
+    """``layers``: the first frame runs every layer, the next ones the first ``layers``; the static scene still
+    flickers less than frame by frame; the fast tier ships with it."""
+    gt, rgb = _scene()
+    m = small_model()
+    calls = []
+    for i, layer in enumerate(m.layers):
+        layer.register_forward_hook(lambda mod, args, out, i=i: calls.append(i))
+    s = StreamRestorer(m, {"layers": 1})
+    frames = [_noisy(gt, t) for t in range(8)]
+    stream = _restore_all(lambda d, c: s.step(d, c), frames, [rgb] * 8)
+    assert calls == [0, 1, 2] + [0] * 7
+    calls.clear()
+    StreamRestorer(m).step(frames[0], rgb)
+    assert calls == [0, 1, 2]
+    per_frame = _restore_all(lambda d, c: restore_depth(d, c[None], model=m), frames, [rgb] * 8)
+    assert (stream[3:] - gt).std(0).mean() < 0.6 * (per_frame[3:] - gt).std(0).mean()
+    with pytest.raises(Exception, match="stream.layers"):
+        RestorerConfig(stream={"layers": 0})
+    assert DepthRestorer.from_preset("fast").config.stream.layers == 1
+
+
 def test_change_test_sees_motion_and_ignores_noise_and_outliers():
     from torch_depth_sr.stream import change_test
 

@@ -223,7 +223,7 @@ class DepthRestorer(nn.Module):
             obs = replace(obs, prior=initial.prior, supported=initial.supported,
                           guidance=self._guidance(guide, initial.state.x))
             state = initial.state
-            for layer in self.layers:
+            for layer in stream.layers(self.layers):
                 state = layer(state, obs)
             x = state.x
             for step in self.post[obs.task]:
@@ -329,6 +329,9 @@ class _NoStream:
 
     def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
         return init(obs)
+
+    def layers(self, layers: nn.ModuleList) -> nn.ModuleList:
+        return layers
 
     def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
         pass

@@ -403,7 +403,8 @@ class StreamConfig(Group):
     not measure: its fill follows the frame's own). The evidence counts the trusted measurements of the run and
     decays by ``hole_decay`` per frame without one; a hole with evidence of at least ``fill_evidence`` is filled
     from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
-    parts keep the previous frame's matches."""
+    parts keep the previous frame's matches. A frame with a previous frame runs the model's first ``layers`` layers
+    (None: all of them): the run's mean and the temporal prior have done much of the later layers' denoising."""
 
     # weight and max_frames fitted on the tuning sequences with the fast tier (docs/measurements/issue28-stream/
     # tune_stream.py): the lowest flicker among the settings no worse than frame by frame in RMSE and trail
@@ -419,9 +420,11 @@ class StreamConfig(Group):
     window: int = 3
     dilate: int = 2
     reuse_matches: bool = True
+    layers: Optional[int] = None
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
                                "hole_decay": real(0.0, 1.0, False), "fill_evidence": positive,
                                "depth_test": positive, "camera_test": optional(real(0.0, 1.0)),
                                "outlier_test": optional(positive), "color_test": positive,
-                               "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean}
+                               "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
+                               "layers": optional(integer(1))}

@@ -39,22 +39,32 @@ __all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "depth_v
 _PRIOR = 6.0  # pseudo-votes of "unchanged" per window
 
 
+def _box_mean(v: torch.Tensor, window: int) -> torch.Tensor:
+    """The mean of ``v`` (B,C,H,W) over the ``window × window`` window, zero padding (as ``avg_pool2d`` with
+    ``count_include_pad``), from cumulative sums in float64 along rows then columns: a few passes over the image
+    whatever the window, where ``avg_pool2d`` reads the whole window at every pixel, and exact to the rounding of
+    the result."""
+    p = window // 2
+    d = F.pad(v.double(), (p + 1, p))
+    c = d.cumsum(-1)
+    d = F.pad(c[..., window:] - c[..., :-window], (0, 0, p + 1, p))
+    c = d.cumsum(-2)
+    return ((c[..., window:, :] - c[..., :-window, :]) / (window * window)).to(v.dtype)
+
+
 def _window_mean(v: torch.Tensor, window: int,
                  weight: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """The window sums of ``v·weight`` and of ``weight`` (the mean is their ratio), zero padding."""
-    pad = window // 2
+    """The window means of ``v·weight`` and of ``weight`` (the weighted mean is their ratio), zero padding."""
     if weight is None:
-        weight = torch.ones_like(v)
-    num = F.avg_pool2d(v * weight, window, stride=1, padding=pad, count_include_pad=True)
-    den = F.avg_pool2d(weight, window, stride=1, padding=pad, count_include_pad=True)
-    return num, den
+        weight = torch.ones_like(v[:, :1])
+    return _box_mean(v * weight, window), _box_mean(weight, window)
 
 
 def local_spread(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, window: int) -> torch.Tensor:
-    """(B,1,H,W): the window mean of ``|y − x|`` over the measured pixels (0 where the window has none): the local
-    noise of the measurements about the restored depth ``x``."""
+    """(B,C,H,W): the window mean of ``|y − x|`` over the measured pixels (0 where the window has none): the local
+    noise of the measurements about the restored depth ``x`` (B,C,H,W: C estimates, a spread about each)."""
     m = (observed > 0).to(y.dtype)
-    num, den = _window_mean(torch.where(m > 0, (y - x).abs(), torch.zeros_like(y)), window, m)
+    num, den = _window_mean(torch.where(m > 0, (y - x).abs(), torch.zeros_like(x)), window, m)
     return torch.where(den > 0, num / den.clamp_min(1e-12), torch.zeros_like(num))
 
 

@@ -145,6 +145,7 @@ class _Frame:
         self.valid: Optional[torch.Tensor] = None
         self.stats: dict = {}
         self.static: Optional[torch.Tensor] = None
+        self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
 
     def observe(self, obs: Observation) -> Observation:
         s, st = self.settings, self.state
@@ -186,7 +187,7 @@ class _Frame:
         unmeasured = ~measured & (evidence < s.fill_evidence)
         age = torch.where(unmeasured, age.clamp(max=s.unmeasured_frames), age)
         weight = torch.where(static, s.weight * age, torch.zeros_like(evidence))
-        self.static = static
+        self.static, self.warm = static, True
         obs = replace(obs, temporal=TemporalPrior(target, weight, static, evidence, averaged, restarted, test.seen))
         if s.reuse_matches and st.matches is not None:
             fresh = dilate(test.changed, search_radius(obs.block_matcher.settings, obs.task))
@@ -210,6 +211,10 @@ class _Frame:
                                 torch.where(held, self.state.valid.to(initial.fill_confident), initial.fill_confident))
         self.valid = ~hole | (confident > 0)
         return initial._replace(fill_confident=confident)
+
+    def layers(self, layers: nn.ModuleList) -> nn.ModuleList:
+        n = self.settings.layers
+        return layers[:n] if self.warm and n is not None else layers
 
     def _from_past(self, obs: Observation) -> torch.Tensor:
         """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""
@@ -252,9 +257,11 @@ class _Frame:
             # where the scene stayed, of their change since the previous estimate (a sensor whose depth steps
             # between levels, far away, moves more from frame to frame than about any one estimate), remembered
             # with a decay of SPREAD_MEMORY per frame
-            spread = local_spread(obs.raw, obs.observed, x, 2 * s.window + 1)
-            if prior is not None:
-                innovation = local_spread(obs.raw, obs.observed, self.state.depth.to(x.dtype), 2 * s.window + 1)
+            if prior is None:
+                spread = local_spread(obs.raw, obs.observed, x, 2 * s.window + 1)
+            else:
+                both = local_spread(obs.raw, obs.observed, torch.cat([x, self.state.depth.to(x)], 1), 2 * s.window + 1)
+                spread, innovation = both[:, :1], both[:, 1:]
                 remembered = torch.maximum(innovation, SPREAD_MEMORY * self.state.spread.to(x.dtype))
                 spread = torch.where(prior.static, torch.maximum(spread, remembered), spread)
             self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
