@@ -3,7 +3,7 @@
 What a frame leaves for the next (:class:`StreamState`): the restored depth; per pixel the *age* (frames of its
 static run), the *evidence* (trusted measurements of the run, decaying over holes), the mean of the run's
 measurements, whether the output had a value, the confidence, the local noise spread; the colour image and the last
-matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the three hooks of :class:`_Frame`:
+matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four hooks of :class:`_Frame`:
 
 1. ``observe`` — the change test (:func:`~torch_depth_sr.stream.change.change_test`) splits static from changed
    pixels (a moving object, what it uncovers, a moved camera); outliers in time are dropped where the past was
@@ -14,7 +14,11 @@ matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the three 
 2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
    confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
    unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
-3. ``keep`` — the state for the next frame.
+3. ``layers`` — the layers the frame runs: with a previous frame, the first ``settings.layers`` (None: all; the
+   trained ``fast`` tier ships with 1: the run's mean and the temporal prior do the later layers' denoising, and on
+   the tuning sequences one layer flickered as little as three, with a lower error and trail, at about half the
+   step's cost: ``docs/measurements/issue28-stream/tune_stream_layers.txt``);
+4. ``keep`` — the state for the next frame.
 
 A frame with no state (the first after construction or :meth:`StreamRestorer.reset`) is the per-frame model's,
 bit for bit. The state is kept without gradient (truncated back-propagation through time: a training step's
