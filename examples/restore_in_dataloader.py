@@ -7,6 +7,9 @@ docs/speed.md). The main process loads the compiled kernels (numba) before the w
 (``torch_depth_sr.warmup``, float32: each kernel once on a tiny input; it compiles them on a fresh install): the
 workers, forked from it, start with them instead of each loading them again.
 
+It prints two rates: over the whole run with the start-up (the warm-up, the workers' fork, the first frames), and the
+steady rate of an epoch, from the batch by which every worker has delivered its first to the last.
+
 On a GPU, restore after collation instead (batched):
     restore = RestoreDepth(preset="fast", device="cuda"); batch = restore({"depth": depth.cuda(), "rgb": rgb.cuda()})
 """
@@ -45,16 +48,22 @@ def main() -> None:
     if a.workers > 0:  # load every kernel in the main process, so that the workers, forked from it, inherit them
         warmup(dtypes=(torch.float32,))  # instead of each loading them from numba's cache
     loader = DataLoader(ds, batch_size=1, num_workers=a.workers)
-    n, se_in, se_out = 0, 0.0, 0.0
+    n, se_in, se_out, arrived = 0, 0.0, 0.0, []
     for b in loader:
+        arrived.append(time.perf_counter())
         valid = b["mask"] > 0
         raw = b["raw_depth"]
         se_in += float((raw - b["gt"])[valid & (raw > 0)].pow(2).mean().sqrt())
         se_out += float((b["depth"] - b["gt"])[valid].pow(2).mean().sqrt())
         n += 1
-    dt = time.perf_counter() - t0
-    print(f"{n} frames {a.size[0]}x{a.size[1]}, tier {a.tier}, {a.workers} workers: {n / dt:.2f} frames/s "
-          f"(includes start-up); RMSE input (measured px) {se_in / n:.2f} -> restored {se_out / n:.2f}")
+    end = time.perf_counter()
+    # the steady rate: from the batch by which every worker has delivered its first (start-up excluded) to the last
+    w = max(1, a.workers)
+    steady = (f"steady {(n - w) / (arrived[-1] - arrived[w - 1]):.2f} once every worker delivered"
+              if n > w and arrived[-1] > arrived[w - 1] else "too few frames for a steady rate")
+    print(f"{n} frames {a.size[0]}x{a.size[1]}, tier {a.tier}, {a.workers} workers: {n / (end - t0):.2f} frames/s "
+          f"(includes start-up; {steady}); RMSE input (measured px) "
+          f"{se_in / n:.2f} -> restored {se_out / n:.2f}")
 
 
 if __name__ == "__main__":
