@@ -404,7 +404,8 @@ class StreamConfig(Group):
     decays by ``hole_decay`` per frame without one; a hole with evidence of at least ``fill_evidence`` is filled
     from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
     parts keep the previous frame's matches. A frame with a previous frame runs the model's first ``layers`` layers
-    (None: all of them): the run's mean and the temporal prior have done much of the later layers' denoising."""
+    (None: all of them): cheaper where the scene stayed (the run's mean and the temporal prior do much of the later
+    layers' work), at the quality of those layers alone where it changed."""
 
     # weight and max_frames fitted on the tuning sequences with the fast tier (docs/measurements/issue28-stream/
     # tune_stream.py): the lowest flicker among the settings no worse than frame by frame in RMSE and trail

@@ -14,10 +14,10 @@ matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four h
 2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
    confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
    unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
-3. ``layers`` — the layers the frame runs: with a previous frame, the first ``settings.layers`` (None: all; the
-   trained ``fast`` tier ships with 1: the run's mean and the temporal prior do the later layers' denoising, and on
-   the tuning sequences one layer flickered as little as three, with a lower error and trail, at about half the
-   step's cost: ``docs/measurements/issue28-stream/tune_stream_layers.txt``);
+3. ``layers`` — the layers the frame runs: with a previous frame, the first ``settings.layers`` (None, the
+   default: all). Fewer layers make a step cheaper where the scene stayed, but the pixels where it changed get only
+   the first layers' restoration (for ``fast``, one layer alone doubles the RMSE on the 2006 scenes: docs/stream.md),
+   so no tier ships with it;
 4. ``keep`` — the state for the next frame.
 
 A frame with no state (the first after construction or :meth:`StreamRestorer.reset`) is the per-frame model's,

@@ -12,7 +12,8 @@ with the lowest mean flicker ratio is printed last.
 Then, at that setting, the layers a frame with a previous frame runs (``layers``: the first 1, 2 or all of the
 model's): among the admissible ones whose mean flicker ratio is within 0.01 of the lowest, the fewest (the cheapest
 step; issue 28's step target). ``--layers-only`` skips the first grid and starts from the shipped setting
-(dilate 2, max_frames 16, weight 2). Prints a table; writes nothing.
+(dilate 2, max_frames 16, weight 2). The tuning sequences do not show what fewer layers cost where the scene
+changed (``cold_layers_2006.py``): no tier ships with the count chosen here. Prints a table; writes nothing.
 """
 from __future__ import annotations
 
