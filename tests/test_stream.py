@@ -268,26 +268,50 @@ def test_stream_settings_are_checked():
 
 
 def test_a_frame_with_a_previous_one_runs_the_first_layers_setting():
-    """``layers``: the first frame runs every layer, the next ones the first ``layers``; the static scene still
-    flickers less than frame by frame. No tier ships with it (a frame whose scene changed gets the quality of the
-    first layers: docs/stream.md)."""
+    """``layers``: the first frame runs every layer; a static pixel whose run has its full mean (``max_frames``) gets
+    the first ``layers`` only, a changed or younger one every layer, on crops around it: the same as every layer on
+    the whole frame where all is changed, one layer where all is old and static; a static scene still flickers less
+    than frame by frame."""
     gt, rgb = _scene()
     m = small_model()
     calls = []
     for i, layer in enumerate(m.layers):
         layer.register_forward_hook(lambda mod, args, out, i=i: calls.append(i))
-    s = StreamRestorer(m, {"layers": 1})
+    s = StreamRestorer(m, {"layers": 1, "max_frames": 3})
     frames = [_noisy(gt, t) for t in range(8)]
     stream = _restore_all(lambda d, c: s.step(d, c), frames, [rgb] * 8)
-    assert calls == [0, 1, 2] + [0] * 7
-    calls.clear()
-    StreamRestorer(m).step(frames[0], rgb)
-    assert calls == [0, 1, 2]
+    assert calls[:6] == [0, 1, 2] * 2  # frames 0 and 1: every pixel's run is younger than max_frames
+    assert calls[-3:] == [0, 0, 0]  # the last frames: static and old everywhere, one layer
     per_frame = _restore_all(lambda d, c: restore_depth(d, c[None], model=m), frames, [rgb] * 8)
     assert (stream[3:] - gt).std(0).mean() < 0.6 * (per_frame[3:] - gt).std(0).mean()
+    # a moved object: its pixels get every layer, on a crop; the rest one
+    calls.clear()
+    moved = _noisy(gt, 9).astype(np.float32)
+    moved[10:20, 5:15] = 700.0
+    rgb2 = rgb.copy()
+    rgb2[:, 10:20, 5:15] = 0.9
+    s.step(moved, rgb2)
+    assert calls == [0, 1, 2]
     with pytest.raises(Exception, match="stream.layers"):
         RestorerConfig(stream={"layers": 0})
-    assert DepthRestorer.from_preset("fast").config.stream is None
+    assert DepthRestorer.from_preset("fast").config.stream.layers == 1  # the fast tier ships with it
+
+
+def test_later_layers_on_crops_equal_the_whole_frame_where_everything_changed():
+    from torch_depth_sr.stream.crop_layers import run_later_layers
+
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m, {"layers": 1})
+    s.step(_noisy(gt, 0), rgb)
+    every = StreamRestorer(m)
+    every.step(_noisy(gt, 0), rgb)
+    # a camera that moved: every pixel changed, so both streams run every layer on the whole frame
+    shifted = np.roll(_noisy(gt, 1), 3, axis=1)
+    rgb_s = np.roll(rgb, 3, axis=2)
+    a, b = s.step(shifted, rgb_s), every.step(shifted, rgb_s)
+    assert np.array_equal(a, b)
+    assert callable(run_later_layers)
 
 
 def test_change_test_sees_motion_and_ignores_noise_and_outliers():

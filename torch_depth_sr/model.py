@@ -37,6 +37,7 @@ from .operators import degradation_operator
 from .post_steps import post_steps
 from .refiner import EdgeRefiner
 from .stages import BlockMatcher, SingularDetector
+from .state import RestorationState
 
 __all__ = [
     "RestorationResult",
@@ -223,8 +224,7 @@ class DepthRestorer(nn.Module):
             obs = replace(obs, prior=initial.prior, supported=initial.supported,
                           guidance=self._guidance(guide, initial.state.x))
             state = initial.state
-            for layer in stream.layers(self.layers):
-                state = layer(state, obs)
+            state = stream.run_layers(self.layers, state, obs)
             x = state.x
             for step in self.post[obs.task]:
                 x = step(x, state, obs, initial)
@@ -330,8 +330,10 @@ class _NoStream:
     def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
         return init(obs)
 
-    def layers(self, layers: nn.ModuleList) -> nn.ModuleList:
-        return layers
+    def run_layers(self, layers: nn.ModuleList, state: RestorationState, obs: Observation) -> RestorationState:
+        for layer in layers:
+            state = layer(state, obs)
+        return state
 
     def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
         pass

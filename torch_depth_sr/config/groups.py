@@ -403,9 +403,9 @@ class StreamConfig(Group):
     not measure: its fill follows the frame's own). The evidence counts the trusted measurements of the run and
     decays by ``hole_decay`` per frame without one; a hole with evidence of at least ``fill_evidence`` is filled
     from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
-    parts keep the previous frame's matches. A frame with a previous frame runs the model's first ``layers`` layers
-    (None: all of them): cheaper where the scene stayed (the run's mean and the temporal prior do much of the later
-    layers' work), at the quality of those layers alone where it changed."""
+    parts keep the previous frame's matches. A frame with a previous frame runs the model's first ``layers`` layers on
+    the whole frame and the others on crops around the pixels that changed or whose static run is younger than
+    ``max_frames`` (:mod:`~torch_depth_sr.stream.crop_layers`; None: every layer everywhere)."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by

@@ -14,10 +14,10 @@ matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four h
 2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
    confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
    unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
-3. ``layers`` — the layers the frame runs: with a previous frame, the first ``settings.layers`` (None, the
-   default: all). Fewer layers make a step cheaper where the scene stayed, but the pixels where it changed get only
-   the first layers' restoration (for ``fast``, one layer alone doubles the RMSE on the 2006 scenes: docs/stream.md),
-   so no tier ships with it;
+3. ``run_layers`` — the layers: with a previous frame and ``settings.layers = n``, the first ``n`` on the whole
+   frame and the others only where the scene changed or the static run is younger than ``max_frames``, on crops
+   around those pixels (:mod:`~torch_depth_sr.stream.crop_layers`; None, the default: every layer on the whole
+   frame);
 4. ``keep`` — the state for the next frame.
 
 A frame with no state (the first after construction or :meth:`StreamRestorer.reset`) is the per-frame model's,
@@ -40,8 +40,10 @@ from ..errors import ShapeError
 from ..initial import InitialEstimate
 from ..model import DepthRestorer, NoiseSigma, _check_fill, _check_model_input, _is_integer_dtype
 from ..observation import Observation
+from ..state import RestorationState
 from ..terms import TemporalPriorTerm
 from .change import change_test, local_spread
+from .crop_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
 
 __all__ = ["StreamRestorer", "StreamResult", "StreamState", "TemporalPrior", "with_stream"]
@@ -216,9 +218,17 @@ class _Frame:
         self.valid = ~hole | (confident > 0)
         return initial._replace(fill_confident=confident)
 
-    def layers(self, layers: nn.ModuleList) -> nn.ModuleList:
+    def run_layers(self, layers: nn.ModuleList, state: RestorationState, obs: Observation) -> RestorationState:
         n = self.settings.layers
-        return layers[:n] if self.warm and n is not None else layers
+        first = layers if not self.warm or n is None else layers[:n]
+        for layer in first:
+            state = layer(state, obs)
+        if len(first) < len(layers):
+            # the rest of the layers where the scene changed or the static run has not yet its full mean
+            # (max_frames measurements): on crops around those pixels (crop_layers)
+            young = self.state.age.to(obs.y.device) + 1 < self.settings.max_frames
+            state = run_later_layers(layers[len(first):], state, obs, ~self.static | young)
+        return state
 
     def _from_past(self, obs: Observation) -> torch.Tensor:
         """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""

@@ -47,7 +47,7 @@ def main() -> None:
 
         steps, colds = [], []
         with torch.no_grad():
-            for _ in range(4):  # the cold first frame and 3 steps
+            for _ in range(10):  # the cold first frame and 9 steps: every static run has its full mean (max_frames 8)
                 stream.step(frame(), rgb)
             model(frame(), rgb)
             for _ in range(a.rounds):

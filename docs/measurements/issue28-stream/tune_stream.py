@@ -83,7 +83,7 @@ def main() -> None:
     for n in LAYERS:
         ok, ratios = score(StreamConfig(dilate=dil, max_frames=cap, weight=w, layers=n))
         rows.append((n, ok, ratios[:, 1].mean()))
-        print(f"dilate {dil} max_frames {cap:.0f} weight {w:.0f} layers {n or 'all'}: {line(ok, ratios)}", flush=True)
+        print(f"dilate {dil} max_frames {cap:g} weight {w:g} layers {n or 'all'}: {line(ok, ratios)}", flush=True)
     admissible = [r for r in rows if r[1]]
     if admissible:
         low = min(r[2] for r in admissible)

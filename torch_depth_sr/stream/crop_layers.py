@@ -1,0 +1,124 @@
+"""The later layers of a stream frame run where the scene changed only: on crops around the changed pixels.
+
+With ``StreamConfig.layers = n`` a frame with a past runs the model's first ``n`` layers on the whole frame; a static
+pixel whose run has its full mean keeps that (the running mean and the temporal prior have done the later layers' work
+there: ``docs/measurements/issue28-stream/layers_2006.txt``). A changed pixel has neither, and a young run too little
+of the mean, so they get the remaining layers,
+run on rectangles around the changed pixels (:func:`~torch_depth_sr.stream.matching.crops`) padded by what the
+layers read around a pixel, and its values are pasted back from there. A crop is the model applied to a sub-image:
+its CG step sizes and preconditioner are the crop's, not the whole frame's, so the values differ from a whole-frame
+run by what that changes, not by a missing neighbour (the padding covers every pixel the layers read).
+
+The crops need the observation, the state and the matches cut to them: a match that leaves its crop keeps its own
+pixel with no weight (such pixels lie in the padding, whose values are not pasted). Layers that match again
+(``Rematch``) or read a guidance network's features are not cut: with them the remaining layers run on the whole
+frame.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Optional
+
+import torch
+from torch import nn
+
+from ..block_matching import BlockMatches
+from ..guidance import NoGuidance
+from ..observation import Observation
+from ..state import RestorationState
+from ..terms import Rematch
+from .matching import crops, search_radius
+
+__all__ = ["run_later_layers"]
+
+# the observation's per-pixel fields, cut with the crop (the others are per sample or shared)
+_OBS_MAPS = ("y", "observed", "rgb", "raw", "glitches", "prior", "supported")
+# the state's per-pixel fields, cut with the crop and pasted back where the scene changed
+_STATE_MAPS = ("x", "z", "w", "e", "alpha", "q", "confidence")
+
+
+def _cut(t: Optional[torch.Tensor], rows: slice, cols: slice) -> Optional[torch.Tensor]:
+    return None if t is None else t[..., rows, cols]
+
+
+def _cut_matches(m: BlockMatches, rows: slice, cols: slice, width: int) -> BlockMatches:
+    """``m`` on the crop, its flat indices in the crop's frame; a match outside the crop points at its own pixel with
+    no weight."""
+    index = m.index[..., rows, cols]
+    y, x = index // width - rows.start, index % width - cols.start
+    hc, wc = rows.stop - rows.start, cols.stop - cols.start
+    inside = (y >= 0) & (y < hc) & (x >= 0) & (x < wc)
+    own = torch.arange(hc * wc, device=index.device).view(hc, wc).expand_as(index)
+    return BlockMatches(m.dist[..., rows, cols], torch.where(inside, y * wc + x, own),
+                        torch.where(inside, m.weight[..., rows, cols], torch.zeros_like(m.weight[..., rows, cols])))
+
+
+def _cut_observation(obs: Observation, rows: slice, cols: slice) -> Observation:
+    changes = {name: _cut(getattr(obs, name), rows, cols) for name in _OBS_MAPS}
+    if obs.temporal is not None:
+        changes["temporal"] = type(obs.temporal)(*(_cut(t, rows, cols) for t in obs.temporal))
+    return replace(obs, **changes)
+
+
+def _cut_state(s: RestorationState, rows: slice, cols: slice) -> RestorationState:
+    width = s.x.shape[-1]
+    changes = {name: _cut(getattr(s, name), rows, cols) for name in _STATE_MAPS}
+    changes["matches"] = None if s.matches is None else _cut_matches(s.matches, rows, cols, width)
+    return replace(s, **changes)
+
+
+def _croppable(layers: nn.ModuleList, obs: Observation) -> bool:
+    """Whether the remaining ``layers`` can run on crops: no re-matching, no guidance features, denoising."""
+    return (obs.task == "denoise" and isinstance(obs.guidance, NoGuidance)
+            and not any(isinstance(step, Rematch) for layer in layers for step in layer.steps[obs.task]))
+
+
+def padding(obs: Observation, layers: int) -> int:
+    """What ``layers`` layers read around a pixel, in pixels: per layer the matches' reach three times (the split
+    steps read the matched values, the x-update's right-hand side and its operator do again) and the gradient's."""
+    return layers * (3 * search_radius(obs.block_matcher.settings, obs.task) + 2)
+
+
+def run_later_layers(layers: nn.ModuleList, state: RestorationState, obs: Observation,
+                     changed: torch.Tensor) -> RestorationState:
+    """``layers`` run where ``changed`` (B,1,H,W) bool: on crops around the changed pixels, whose values are pasted
+    into ``state``; on the whole frame when the crops would cover most of it or the layers cannot be cut."""
+    if len(layers) == 0 or not bool(changed.any()):
+        return state
+    h, w = state.x.shape[-2:]
+    boxes = crops(changed, padding(obs, len(layers))) if _croppable(layers, obs) else []
+    area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
+    if not boxes or area >= 0.8 * h * w:
+        full = state
+        for layer in layers:
+            full = layer(full, obs)
+        return _paste_where(state, full, changed, (slice(0, h), slice(0, w)), (slice(0, h), slice(0, w)))
+    out = state
+    for rows, cols, core_r, core_c in boxes:
+        part = _cut_state(state, rows, cols)
+        part_obs = _cut_observation(obs, rows, cols)
+        for layer in layers:
+            part = layer(part, part_obs)
+        inner = (slice(core_r.start - rows.start, core_r.stop - rows.start),
+                 slice(core_c.start - cols.start, core_c.stop - cols.start))
+        out = _paste_where(out, part, changed, (core_r, core_c), inner)
+    return out
+
+
+def _paste_where(state: RestorationState, part: RestorationState, changed: torch.Tensor,
+                 core: tuple[slice, slice], inner: tuple[slice, slice]) -> RestorationState:
+    """``state`` with ``part``'s per-pixel fields (their ``inner`` region) at the changed pixels of ``core``; the
+    singular gate's verdict of a sample holds where both found it clean; the matches stay ``state``'s."""
+    changes = {}
+    mask = changed[..., core[0], core[1]]
+    for name in _STATE_MAPS:
+        full, new = getattr(state, name), getattr(part, name)
+        merged = full.clone()
+        merged[..., core[0], core[1]] = torch.where(mask, new[..., inner[0], inner[1]], full[..., core[0], core[1]])
+        changes[name] = merged
+    if state.clean is not None and part.clean is not None:
+        changes["clean"] = state.clean & part.clean
+    elif part.clean is not None:
+        changes["clean"] = part.clean
+    return replace(state, **changes)
+
