@@ -22,12 +22,11 @@ from typing import Optional
 import torch
 from torch import nn
 
-from ..block_matching import BlockMatches
 from ..guidance import NoGuidance
 from ..observation import Observation
 from ..state import RestorationState
 from ..terms import Rematch
-from .matching import crops, search_radius
+from .matching import crop_matches, crops, search_radius
 
 __all__ = ["run_later_layers"]
 
@@ -41,18 +40,6 @@ def _cut(t: Optional[torch.Tensor], rows: slice, cols: slice) -> Optional[torch.
     return None if t is None else t[..., rows, cols]
 
 
-def _cut_matches(m: BlockMatches, rows: slice, cols: slice, width: int) -> BlockMatches:
-    """``m`` on the crop, its flat indices in the crop's frame; a match outside the crop points at its own pixel with
-    no weight."""
-    index = m.index[..., rows, cols]
-    y, x = index // width - rows.start, index % width - cols.start
-    hc, wc = rows.stop - rows.start, cols.stop - cols.start
-    inside = (y >= 0) & (y < hc) & (x >= 0) & (x < wc)
-    own = torch.arange(hc * wc, device=index.device).view(hc, wc).expand_as(index)
-    return BlockMatches(m.dist[..., rows, cols], torch.where(inside, y * wc + x, own),
-                        torch.where(inside, m.weight[..., rows, cols], torch.zeros_like(m.weight[..., rows, cols])))
-
-
 def _cut_observation(obs: Observation, rows: slice, cols: slice) -> Observation:
     changes = {name: _cut(getattr(obs, name), rows, cols) for name in _OBS_MAPS}
     if obs.temporal is not None:
@@ -63,7 +50,7 @@ def _cut_observation(obs: Observation, rows: slice, cols: slice) -> Observation:
 def _cut_state(s: RestorationState, rows: slice, cols: slice) -> RestorationState:
     width = s.x.shape[-1]
     changes = {name: _cut(getattr(s, name), rows, cols) for name in _STATE_MAPS}
-    changes["matches"] = None if s.matches is None else _cut_matches(s.matches, rows, cols, width)
+    changes["matches"] = None if s.matches is None else crop_matches(s.matches, rows, cols, width, outside="own")
     return replace(s, **changes)
 
 
@@ -89,36 +76,22 @@ def run_later_layers(layers: nn.ModuleList, state: RestorationState, obs: Observ
     boxes = crops(changed, padding(obs, len(layers))) if _croppable(layers, obs) else []
     area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
     if not boxes or area >= 0.8 * h * w:
-        full = state
-        for layer in layers:
-            full = layer(full, obs)
-        return _paste_where(state, full, changed, (slice(0, h), slice(0, w)), (slice(0, h), slice(0, w)))
-    out = state
+        whole = (slice(0, h), slice(0, w))
+        boxes, cut = [(*whole, *whole)], False
+    else:
+        cut = True
+    merged = {name: getattr(state, name).clone() for name in _STATE_MAPS}  # one copy, every crop pasted into it
+    clean = state.clean
     for rows, cols, core_r, core_c in boxes:
-        part = _cut_state(state, rows, cols)
-        part_obs = _cut_observation(obs, rows, cols)
+        part, part_obs = (_cut_state(state, rows, cols), _cut_observation(obs, rows, cols)) if cut else (state, obs)
         for layer in layers:
             part = layer(part, part_obs)
         inner = (slice(core_r.start - rows.start, core_r.stop - rows.start),
                  slice(core_c.start - cols.start, core_c.stop - cols.start))
-        out = _paste_where(out, part, changed, (core_r, core_c), inner)
-    return out
-
-
-def _paste_where(state: RestorationState, part: RestorationState, changed: torch.Tensor,
-                 core: tuple[slice, slice], inner: tuple[slice, slice]) -> RestorationState:
-    """``state`` with ``part``'s per-pixel fields (their ``inner`` region) at the changed pixels of ``core``; the
-    singular gate's verdict of a sample holds where both found it clean; the matches stay ``state``'s."""
-    changes = {}
-    mask = changed[..., core[0], core[1]]
-    for name in _STATE_MAPS:
-        full, new = getattr(state, name), getattr(part, name)
-        merged = full.clone()
-        merged[..., core[0], core[1]] = torch.where(mask, new[..., inner[0], inner[1]], full[..., core[0], core[1]])
-        changes[name] = merged
-    if state.clean is not None and part.clean is not None:
-        changes["clean"] = state.clean & part.clean
-    elif part.clean is not None:
-        changes["clean"] = part.clean
-    return replace(state, **changes)
-
+        mask = changed[..., core_r, core_c]
+        for name, full in merged.items():
+            full[..., core_r, core_c] = torch.where(mask, getattr(part, name)[..., inner[0], inner[1]],
+                                                    full[..., core_r, core_c])
+        # the singular gate's verdict of a sample holds where every run found it clean
+        clean = part.clean if clean is None else (clean if part.clean is None else clean & part.clean)
+    return replace(state, clean=clean, **merged)

@@ -21,7 +21,7 @@ from ..observation import Observation
 from ..stages import BlockMatcher
 from ..window_max import max_filter
 
-__all__ = ["StreamMatcher", "crops", "dilate", "search_radius"]
+__all__ = ["StreamMatcher", "crop_matches", "crops", "dilate", "search_radius"]
 
 
 def search_radius(settings: BlockMatchingConfig, task: str) -> int:
@@ -56,14 +56,21 @@ def crops(fresh: torch.Tensor, pad: int) -> list[tuple[slice, slice, slice, slic
     return out
 
 
-def _crop_matches(m: BlockMatches, rows: slice, cols: slice, width: int) -> BlockMatches:
-    """Matches of a crop with their flat indices in the crop's frame (indices outside the crop become -1)."""
+def crop_matches(m: BlockMatches, rows: slice, cols: slice, width: int, outside: str = "missing") -> BlockMatches:
+    """Matches of a crop with their flat indices in the crop's frame. A match outside the crop is ``"missing"``
+    (index -1: re-matching replaces it) or its pixel's ``"own"`` index with no weight (for the layers, which read
+    every index)."""
     index = m.index[..., rows, cols]
     y, x = index // width - rows.start, index % width - cols.start
     wc, hc = cols.stop - cols.start, rows.stop - rows.start
     inside = (y >= 0) & (y < hc) & (x >= 0) & (x < wc)
+    weight = m.weight[..., rows, cols]
+    if outside == "own":
+        own = torch.arange(hc * wc, device=index.device).view(hc, wc).expand_as(index)
+        return BlockMatches(m.dist[..., rows, cols], torch.where(inside, y * wc + x, own),
+                            torch.where(inside, weight, torch.zeros_like(weight)))
     index = torch.where(inside, y * wc + x, torch.full_like(index, -1))
-    return BlockMatches(m.dist[..., rows, cols], index, m.weight[..., rows, cols])
+    return BlockMatches(m.dist[..., rows, cols], index, weight)
 
 
 class StreamMatcher:
@@ -127,7 +134,7 @@ class StreamMatcher:
             for rows, cols, core_r, core_c in boxes:
                 crop_obs = replace(obs, rgb=None if obs.rgb is None else obs.rgb[..., rows, cols])
                 crop_q = q_full[..., rows, cols] if q_full is not None else q
-                prev = None if previous is None else _crop_matches(previous, rows, cols, w)
+                prev = None if previous is None else crop_matches(previous, rows, cols, w)
                 m = self._search(x[..., rows, cols], crop_obs, crop_q, prev)
                 self.searched += (rows.stop - rows.start) * (cols.stop - cols.start)
                 wc = cols.stop - cols.start
