@@ -10,17 +10,14 @@ Prints one row per setting; writes nothing. The held-out 2005/2003/2001 scenes a
 """
 from __future__ import annotations
 
-import argparse
 import itertools
 import statistics
 
 import torch
+from middlebury_streams import arguments, degraded_frames, scenes
 
 from torch_depth_sr import DepthRestorer
-from torch_depth_sr._data_root import data_root
 from torch_depth_sr.config import StreamConfig
-from torch_depth_sr.datasets.discover import find_scenes
-from torch_depth_sr.degradations import make_degradation
 from torch_depth_sr.evaluation.bench import _metrics
 from torch_depth_sr.stream import StreamRestorer
 
@@ -28,22 +25,13 @@ GRID = {"weight": (0.5, 1.0, 2.0), "max_frames": (4.0, 8.0, 16.0)}
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--frames", type=int, default=16)
-    p.add_argument("--scenes", nargs="+", default=["Baby1", "Cloth1", "Midd1", "Wood1"])
-    p.add_argument("--threads", type=int, default=2)
-    a = p.parse_args()
+    a = arguments(__doc__, frames=16).parse_args()
     torch.set_num_threads(a.threads)
     model = DepthRestorer.from_preset("fast")
     streams = []  # (track, frames, frame-by-frame rmse over the second half)
     for track in ("paper", "sensor"):
-        for rec in [r for r in find_scenes(data_root(), track) if r.name in a.scenes]:
-            scene = rec.load()
-            frames = []
-            for t in range(a.frames):
-                s = make_degradation(track, seed=t)(scene)
-                s["depth"] = s["depth"].clamp_min(0)
-                frames.append(s)
+        for rec in scenes(track, a.scenes):
+            frames = degraded_frames(rec.load(), track, a.frames)
             with torch.no_grad():
                 base = [_metrics(model(s["depth"][None], s["rgb"][None]), s, track)["rmse"]
                         for s in frames[a.frames // 2:]]

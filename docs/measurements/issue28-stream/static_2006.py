@@ -10,41 +10,27 @@ mean over the scenes). The held-out 2005/2003/2001 scenes are never loaded here.
 """
 from __future__ import annotations
 
-import argparse
 import statistics
-import sys
-from pathlib import Path
 
 import torch
+from middlebury_streams import arguments, degraded_frames, scenes
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "issue27-tiers"))
-
-from torch_depth_sr import DepthRestorer  # noqa: E402
-from torch_depth_sr._data_root import data_root  # noqa: E402
-from torch_depth_sr.datasets.discover import find_scenes  # noqa: E402
-from torch_depth_sr.degradations import make_degradation  # noqa: E402
-from torch_depth_sr.evaluation.bench import _metrics  # noqa: E402
-from torch_depth_sr.stream import StreamRestorer  # noqa: E402
+from torch_depth_sr import DepthRestorer
+from torch_depth_sr.evaluation.bench import _metrics
+from torch_depth_sr.stream import StreamRestorer
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--frames", type=int, default=10)
-    p.add_argument("--scenes", nargs="+", default=["Baby1", "Cloth1", "Midd1", "Wood1"])
+    p = arguments(__doc__, frames=10, threads=1)
     p.add_argument("--tracks", nargs="+", default=["paper", "sensor"])
     a = p.parse_args()
-    torch.set_num_threads(1)
+    torch.set_num_threads(a.threads)
     model = DepthRestorer.from_preset("fast")
     for track in a.tracks:
-        records = [r for r in find_scenes(data_root(), track) if r.name in a.scenes]
+        records = scenes(track, a.scenes)
         scores: dict = {"frame": [], "stream, every layer": [], "stream, layers 1": []}
         for rec in records:
-            scene = rec.load()
-            frames = []
-            for t in range(a.frames):
-                s = make_degradation(track, seed=t)(scene)
-                s["depth"] = s["depth"].clamp_min(0)
-                frames.append(s)
+            frames = degraded_frames(rec.load(), track, a.frames)
             streams = {"stream, every layer": StreamRestorer(model, {"layers": None}),
                        "stream, layers 1": StreamRestorer(model, {"layers": 1})}
             rows: dict = {k: [] for k in scores}

@@ -9,34 +9,21 @@ frames). The held-out 2005/2003/2001 scenes are never loaded here.
 """
 from __future__ import annotations
 
-import argparse
-
 import torch
+from middlebury_streams import arguments, degraded_frames, scenes
 
 from torch_depth_sr import DepthRestorer
-from torch_depth_sr._data_root import data_root
-from torch_depth_sr.datasets.discover import find_scenes
-from torch_depth_sr.degradations import make_degradation
 from torch_depth_sr.evaluation.bench import _metrics
 from torch_depth_sr.stream import StreamRestorer
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--frames", type=int, default=10)
-    p.add_argument("--scenes", nargs="+", default=["Baby1", "Cloth1", "Midd1", "Wood1"])
-    p.add_argument("--threads", type=int, default=2)
-    a = p.parse_args()
+    a = arguments(__doc__, frames=10).parse_args()
     torch.set_num_threads(a.threads)
     model = DepthRestorer.from_preset("fast")
     for track in ("paper", "sensor"):
-        for rec in [r for r in find_scenes(data_root(), track) if r.name in a.scenes]:
-            scene = rec.load()
-            frames = []
-            for t in range(a.frames):
-                s = make_degradation(track, seed=t)(scene)
-                s["depth"] = s["depth"].clamp_min(0)
-                frames.append(s)
+        for rec in scenes(track, a.scenes):
+            frames = degraded_frames(rec.load(), track, a.frames)
             rows = {"frame": [], "stream, every layer": [], "stream, layers 1": []}
             streams = {"stream, every layer": StreamRestorer(model, {"layers": None}),
                        "stream, layers 1": StreamRestorer(model, {"layers": 1})}
