@@ -176,6 +176,31 @@ def test_holes_are_filled_only_from_a_confident_past_never_across_a_gap():
     assert (r.confidence[10:30, gap] > 0).all()
 
 
+def test_a_single_departure_from_a_static_run_is_held_out_and_a_repeated_one_starts_a_new_mean():
+    """At a depth edge a mixed pixel takes the other side's depth in single frames: the first departure from a
+    confident run is held out (the run's mean and the output stay), the same departure in the next frame starts a
+    new mean."""
+    gt, rgb = _scene()
+    s = StreamRestorer(small_model())
+    for t in range(5):
+        s.step(_noisy(gt, t, holes=0.0), rgb)
+    rows, col = [4, 12, 20, 28], W // 2 - 1  # the left side's last column; its right neighbour is 600 mm farther
+    before = s.state.mean[0, 0, rows, col].clone()
+    d = _noisy(gt, 5, holes=0.0)
+    d[rows, col] = np.round(gt[rows, col + 1]).astype(np.uint16)
+    r = s.step(d, rgb, return_details=True)
+    assert r.info["stream"]["held_out"] > 0
+    assert np.abs(r.depth[rows, col].astype(np.float64) - gt[rows, col]).max() < 30
+    assert torch.allclose(s.state.mean[0, 0, rows, col], before)  # the run goes on without the departure
+    assert (s.state.departed[0, 0, rows, col] > 0).all()
+    d = _noisy(gt, 6, holes=0.0)
+    d[rows, col] = np.round(gt[rows, col + 1]).astype(np.uint16)
+    s.step(d, rgb)
+    new = torch.from_numpy(d[rows, col].astype(np.float32))
+    assert torch.allclose(s.state.mean[0, 0, rows, col].float(), new)  # confirmed: a new mean, the measurement
+    assert (s.state.departed[0, 0, rows, col] == 0).all()
+
+
 def test_never_measured_holes_stay_holes_after_the_first_frame():
     """A hole the past never measured keeps the first frame's verdict while it stays a hole and its colour does not
     change: it never turns into a fill from the past."""

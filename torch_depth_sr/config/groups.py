@@ -395,7 +395,9 @@ class StreamConfig(Group):
     colour image as a whole shifted (its change falls below ``camera_test`` times the unshifted change; None = never),
     the camera moved and every pixel is changed. In a static window a measurement that matches no
     previous value near it by ``outlier_test`` is an outlier in time, dropped where the past was measured (None =
-    never), and one that left the mean of its run by as much starts a new mean.
+    never). One that left the mean of its run by as much is held out the first time, the pixel keeping the mean (a
+    mixed pixel at a depth edge takes the other side's depth in single frames), and starts a new mean when the next
+    frame's measurement left it to the same value.
 
     On a static pixel the model sees the mean of the run's measurements (``y``), and the layers pull x to the
     previous estimate with ``weight`` times the pixel's age (:class:`~torch_depth_sr.terms.TemporalPriorTerm`); the

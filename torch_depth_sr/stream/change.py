@@ -21,8 +21,9 @@ The changed pixels are then dilated by ``dilate`` pixels (a moving edge's neighb
 measured pixel can still disagree with the past: if its value matches none of the previous values near it (``d1 >
 outlier_test``) it is an *outlier in time* — a flying pixel, an impulse — that the stream drops where the past was
 measured confidently. One that matches a neighbour's previous value (``d1`` small, ``d0`` large: an edge placed one
-pixel off before) is kept, and so is the pixel's static run: the measurement and the past settle the edge between
-them over the next frames.
+pixel off before, or a mixed pixel that took the other side's depth) is no outlier here; the stream holds it out
+once, as a first departure from the pixel's run, and starts a new run when the next frame confirms it
+(:class:`~torch_depth_sr.stream.restorer.StreamRestorer`).
 """
 from __future__ import annotations
 

@@ -78,6 +78,7 @@ class StreamState:
     spread: torch.Tensor  # (B,1,H,W) local mean |y − x| of the measurements about the restored depth
     rgb: Optional[torch.Tensor]  # (B,3,H,W) the colour image
     matches: Optional[tuple[torch.Tensor, torch.Tensor]]  # the last layer's (dist, index), or None
+    departed: torch.Tensor  # (B,1,H,W) a measurement held out as the first departure from its run's mean (0: none)
 
 
 class StreamResult(NamedTuple):
@@ -151,6 +152,7 @@ class _Frame:
         self.valid: Optional[torch.Tensor] = None
         self.stats: dict = {}
         self.static: Optional[torch.Tensor] = None
+        self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
         self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
 
     def observe(self, obs: Observation) -> Observation:
@@ -172,6 +174,9 @@ class _Frame:
             own = (obs.rgb - st.rgb.to(obs.rgb)).abs().mean(1, keepdim=True) > s.color_test
             static = static & ~(own & (obs.observed <= 0))
         evidence = st.evidence.to(dt)
+        mean = obs.normalise(st.mean.to(dt))
+        had = (st.mean > 0) & (evidence > 0)
+        limit = (s.outlier_test or math.inf) * noise
         # an outlier in time where the past was measured confidently: taken as missing (held at the past)
         outlier = test.outlier & (evidence >= s.fill_evidence)
         self.stats["outliers_in_time"] = float(outlier.float().mean())
@@ -179,12 +184,21 @@ class _Frame:
             obs = replace(obs, observed=torch.where(outlier, torch.zeros_like(obs.observed), obs.observed),
                           y=torch.where(outlier, torch.zeros_like(obs.y), obs.y), glitches=obs.glitches | outlier)
         # the measurement of a static pixel joins the mean of its run (the model sees the mean: every stage that
-        # reads y, the data term and the do-no-harm band included); a measurement that left the mean by more than
-        # outlier_test noise levels (an edge settling, a step of the sensor) starts a new mean
+        # reads y, the data term and the do-no-harm band included). A measurement that left the mean by more than
+        # outlier_test noise levels starts a new mean when the previous frame's measurement had left it to the same
+        # value (an edge settling, a step of the sensor: it stays); a first departure from a confident run is held
+        # out (the pixel keeps its run's mean) and remembered (at a depth edge a mixed or flying pixel takes the other side's depth in
+        # single frames: a new mean each time flipped the edge from frame to frame)
+        departed = static & (obs.observed > 0) & had & ((obs.y - mean).abs() > limit)
+        pending = obs.normalise(st.departed.to(dt))
+        confirmed = (st.departed > 0) & ((obs.y - pending).abs() <= limit)
+        held_out = departed & ~confirmed & (evidence >= s.fill_evidence)
+        self.departed = torch.where(held_out, obs.denormalise(obs.y), torch.zeros_like(obs.y)).detach()
+        self.stats["held_out"] = float(held_out.float().mean())
+        if bool(held_out.any()):
+            obs = replace(obs, y=torch.where(held_out, mean, obs.y))
         measured = obs.observed > 0
-        mean = obs.normalise(st.mean.to(dt))
-        had = (st.mean > 0) & (evidence > 0)
-        restarted = static & measured & had & ((obs.y - mean).abs() > (s.outlier_test or math.inf) * noise)
+        restarted = departed & ~held_out
         averaged = static & measured & had & ~restarted
         y = torch.where(averaged, (obs.y + evidence * mean) / (evidence + 1), obs.y)
         obs = replace(obs, y=y)
@@ -279,7 +293,8 @@ class _Frame:
                 remembered = torch.maximum(innovation, SPREAD_MEMORY * self.state.spread.to(x.dtype))
                 spread = torch.where(prior.static, torch.maximum(spread, remembered), spread)
             self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
-                                    confidence=confidence, spread=spread, rgb=rgb, matches=matches)
+                                    confidence=confidence, spread=spread, rgb=rgb, matches=matches,
+                                    departed=torch.zeros_like(x) if self.departed is None else self.departed)
 
 
 class StreamRestorer(nn.Module):
