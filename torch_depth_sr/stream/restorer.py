@@ -7,10 +7,11 @@ matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four h
 
 1. ``observe`` — the change test (:func:`~torch_depth_sr.stream.change.change_test`) splits static from changed
    pixels (a moving object, what it uncovers, a moved camera); outliers in time are dropped where the past was
-   measured; on static pixels ``y`` becomes the mean of the run's measurements (a new mean where a measurement left
-   it); the temporal prior (``obs.temporal``: the previous estimate and the weight ``settings.weight × age`` on static
-   pixels, read by :class:`~torch_depth_sr.terms.TemporalPriorTerm` in every layer) and the matcher that keeps the
-   previous matches where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`);
+   measured; on static pixels ``y`` becomes the mean of the run's measurements (a measurement that left it is held
+   out once and starts a new mean when the next frame's confirms it); the temporal prior (``obs.temporal``: the
+   previous estimate and the weight ``settings.weight × age`` on static pixels, read by
+   :class:`~torch_depth_sr.terms.TemporalPriorTerm` in every layer) and the matcher that keeps the previous matches
+   where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`);
 2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
    confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
    unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
@@ -187,8 +188,8 @@ class _Frame:
         # reads y, the data term and the do-no-harm band included). A measurement that left the mean by more than
         # outlier_test noise levels starts a new mean when the previous frame's measurement had left it to the same
         # value (an edge settling, a step of the sensor: it stays); a first departure from a confident run is held
-        # out (the pixel keeps its run's mean) and remembered (at a depth edge a mixed or flying pixel takes the other side's depth in
-        # single frames: a new mean each time flipped the edge from frame to frame)
+        # out (the pixel keeps its run's mean) and remembered (at a depth edge a mixed or flying pixel takes the
+        # other side's depth in single frames: a new mean each time flipped the edge from frame to frame)
         departed = static & (obs.observed > 0) & had & ((obs.y - mean).abs() > limit)
         pending = obs.normalise(st.departed.to(dt))
         confirmed = (st.departed > 0) & ((obs.y - pending).abs() <= limit)
