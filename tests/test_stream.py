@@ -201,6 +201,32 @@ def test_a_single_departure_from_a_static_run_is_held_out_and_a_repeated_one_sta
     assert (s.state.departed[0, 0, rows, col] == 0).all()
 
 
+def test_a_thin_object_of_unchanged_colour_appears_and_leaves_within_one_frame():
+    """A pole one pixel wide, 340 mm in front of a static plane and of the plane's colour: no window of the change
+    test sees it, and its measurements match no previous value near them (outliers in time). The stream holds them
+    out for one frame only: from the second frame it shows the pole, as frame-by-frame restoration does, and one frame
+    after the pole has gone, the plane again."""
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m)
+    for t in range(10):
+        s.step(_noisy(gt, t, holes=0.0), rgb)
+    pole = (slice(8, 32), 10)
+
+    def with_pole(t):
+        d = _noisy(gt, t, holes=0.0)
+        d[pole] = 700
+        return d
+
+    assert np.median(restore_depth(with_pole(10), rgb[None], model=m)[pole]) < 720  # the frame alone sees it
+    s.step(with_pole(10), rgb)
+    for t in (11, 12):
+        assert np.median(s.step(with_pole(t), rgb)[pole].astype(np.float64)) < 720
+    s.step(_noisy(gt, 13, holes=0.0), rgb)
+    out = s.step(_noisy(gt, 14, holes=0.0), rgb)[pole].astype(np.float64)
+    assert np.abs(np.median(out) - np.median(gt[pole])) < 20
+
+
 def test_never_measured_holes_stay_holes_after_the_first_frame():
     """A hole the past never measured keeps the first frame's verdict while it stays a hole and its colour does not
     change: it never turns into a fill from the past."""

@@ -393,11 +393,11 @@ class StreamConfig(Group):
     around it, the mean colour change exceeds ``color_test`` (the frame's median change removed), most measurements
     lie farther than ``depth_test`` from the previous estimate; changed pixels are dilated by ``dilate``. When the
     colour image as a whole shifted (its change falls below ``camera_test`` times the unshifted change; None = never),
-    the camera moved and every pixel is changed. In a static window a measurement that matches no
-    previous value near it by ``outlier_test`` is an outlier in time, dropped where the past was measured (None =
-    never). One that left the mean of its run by as much is held out the first time, the pixel keeping the mean (a
-    mixed pixel at a depth edge takes the other side's depth in single frames), and starts a new mean when the next
-    frame's measurement left it to the same value.
+    the camera moved and every pixel is changed. In a static window a measurement that matches no previous value
+    near it by ``outlier_test`` is an outlier in time, dropped where the past was measured, unless it repeats the
+    previous frame's dropped or held-out value (None = never). One that left the mean of its run by as much is held
+    out the first time, the pixel keeping the mean (a mixed pixel at a depth edge takes the other side's depth in
+    single frames). A repeated value starts a new run: a new mean and, in that frame, no temporal pull.
 
     On a static pixel the model sees the mean of the run's measurements (``y``), and the layers pull x to the
     previous estimate with ``weight`` times the pixel's age (:class:`~torch_depth_sr.terms.TemporalPriorTerm`); the

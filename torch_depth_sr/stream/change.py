@@ -20,7 +20,8 @@ A pixel is *changed* (:func:`change_test`) when its colour or its depth changed 
 The changed pixels are then dilated by ``dilate`` pixels (a moving edge's neighbours). In a static window a single
 measured pixel can still disagree with the past: if its value matches none of the previous values near it (``d1 >
 outlier_test``) it is an *outlier in time* — a flying pixel, an impulse — that the stream drops where the past was
-measured confidently. One that matches a neighbour's previous value (``d1`` small, ``d0`` large: an edge placed one
+measured confidently, for one frame when the next measures the same value (a thin object that no window sees).
+One that matches a neighbour's previous value (``d1`` small, ``d0`` large: an edge placed one
 pixel off before, or a mixed pixel that took the other side's depth) is no outlier here; the stream holds it out
 once, as a first departure from the pixel's run, and starts a new run when the next frame confirms it
 (:class:`~torch_depth_sr.stream.restorer.StreamRestorer`).

@@ -8,8 +8,8 @@ matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four h
 1. ``observe`` — the change test (:func:`~torch_depth_sr.stream.change.change_test`) splits static from changed
    pixels (a moving object, what it uncovers, a moved camera); outliers in time are dropped where the past was
    measured; on static pixels ``y`` becomes the mean of the run's measurements (a measurement that left it is held
-   out once and starts a new mean when the next frame's confirms it); the temporal prior (``obs.temporal``: the
-   previous estimate and the weight ``settings.weight × age`` on static pixels, read by
+   out); a dropped or held-out value that the next frame measures again starts a new run; the temporal prior
+   (``obs.temporal``: the previous estimate and the weight ``settings.weight × age`` on static pixels, read by
    :class:`~torch_depth_sr.terms.TemporalPriorTerm` in every layer) and the matcher that keeps the previous matches
    where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`);
 2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
@@ -178,23 +178,27 @@ class _Frame:
         mean = obs.normalise(st.mean.to(dt))
         had = (st.mean > 0) & (evidence > 0)
         limit = (s.outlier_test or math.inf) * noise
-        # an outlier in time where the past was measured confidently: taken as missing (held at the past)
-        outlier = test.outlier & (evidence >= s.fill_evidence)
+        # the value the previous frame held out or dropped, measured again: the scene changed at this pixel (a
+        # pole, an edge that moved, a surface that stepped) and a run starts from it
+        pending = obs.normalise(st.departed.to(dt))
+        confirmed = (st.departed > 0) & (obs.observed > 0) & ((obs.y - pending).abs() <= limit)
+        # an outlier in time where the past was measured confidently: taken as missing (held at the past), and
+        # remembered
+        outlier = test.outlier & (evidence >= s.fill_evidence) & ~confirmed
+        dropped = torch.where(outlier, obs.denormalise(obs.y), torch.zeros_like(obs.y))
         self.stats["outliers_in_time"] = float(outlier.float().mean())
         if bool(outlier.any()):
             obs = replace(obs, observed=torch.where(outlier, torch.zeros_like(obs.observed), obs.observed),
                           y=torch.where(outlier, torch.zeros_like(obs.y), obs.y), glitches=obs.glitches | outlier)
         # the measurement of a static pixel joins the mean of its run (the model sees the mean: every stage that
         # reads y, the data term and the do-no-harm band included). A measurement that left the mean by more than
-        # outlier_test noise levels starts a new mean when the previous frame's measurement had left it to the same
-        # value (an edge settling, a step of the sensor: it stays); a first departure from a confident run is held
-        # out (the pixel keeps its run's mean) and remembered (at a depth edge a mixed or flying pixel takes the
-        # other side's depth in single frames: a new mean each time flipped the edge from frame to frame)
+        # outlier_test noise levels starts a new run when the previous frame's measurement had left it to the same
+        # value (confirmed); a first departure from a confident run is held out (the pixel keeps its run's mean) and
+        # remembered (at a depth edge a mixed or flying pixel takes the other side's depth in single frames: a new
+        # mean each time flipped the edge from frame to frame)
         departed = static & (obs.observed > 0) & had & ((obs.y - mean).abs() > limit)
-        pending = obs.normalise(st.departed.to(dt))
-        confirmed = (st.departed > 0) & ((obs.y - pending).abs() <= limit)
         held_out = departed & ~confirmed & (evidence >= s.fill_evidence)
-        self.departed = torch.where(held_out, obs.denormalise(obs.y), torch.zeros_like(obs.y)).detach()
+        self.departed = torch.where(held_out, obs.denormalise(obs.y), dropped).detach()
         self.stats["held_out"] = float(held_out.float().mean())
         if bool(held_out.any()):
             obs = replace(obs, y=torch.where(held_out, mean, obs.y))
@@ -207,7 +211,7 @@ class _Frame:
         age = st.age.to(dt)
         unmeasured = ~measured & (evidence < s.fill_evidence)
         age = torch.where(unmeasured, age.clamp(max=s.unmeasured_frames), age)
-        weight = torch.where(static, s.weight * age, torch.zeros_like(evidence))
+        weight = torch.where(static & ~restarted, s.weight * age, torch.zeros_like(evidence))
         self.static, self.warm = static, True
         obs = replace(obs, temporal=TemporalPrior(target, weight, static, evidence, averaged, restarted, test.seen))
         if s.reuse_matches and st.matches is not None:
