@@ -132,7 +132,9 @@ class GuidanceNet(nn.Module):
         b, _, h, w = like.shape
         if rgb is None:
             rgb = like.new_full((b, 3, h, w), 0.5)
-        return self.guide(rgb.to(self.mix.weight.dtype) - 0.5)  # (B,C,H,W)
+        # channels-last (here and in raw): on the CPU oneDNN's kernels for these thin convolutions are about 1.5 times
+        # as fast as with the default layout (the same sums in another order)
+        return self.guide((rgb.to(self.mix.weight.dtype) - 0.5).contiguous(memory_format=torch.channels_last))
 
     @staticmethod
     @torch.no_grad()
@@ -151,9 +153,10 @@ class GuidanceNet(nn.Module):
 
     def raw(self, index: int, guide_features: torch.Tensor, state_features: torch.Tensor) -> torch.Tensor:
         """The head's output ``r (B,5,H,W)`` of layer ``index`` (the log-multipliers are ``c·tanh(r)``)."""
-        h = F.relu(guide_features + self.state(state_features.to(guide_features.dtype)))
+        state = state_features.to(guide_features.dtype).contiguous(memory_format=torch.channels_last)
+        h = F.relu(guide_features + self.state(state))
         h = F.relu(self.mix(h))  # (B,C,H,W)
-        return self.heads[index](h)
+        return self.heads[index](h).contiguous()
 
     def prepare(self, rgb: Optional[torch.Tensor], like: Optional[torch.Tensor] = None) -> "PreparedGuidance":
         """Encode the colour image once per forward; the layers then ask :meth:`PreparedGuidance.maps`."""

@@ -103,7 +103,10 @@ class EdgeRefiner(nn.Module):
     def correct(self, x: torch.Tensor, phi: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
                 unit: torch.Tensor) -> torch.Tensor:
         """``x`` plus the network's step (in units of ``unit``), clamped to ``[lo, hi]``."""
-        step = self.body(phi.to(self.body[0].weight.dtype)).to(x.dtype) * unit
+        # channels-last: on the CPU oneDNN's kernels for these thin layers take half the time of the default layout
+        # (the same sums in another order: the step within float rounding)
+        phi = phi.to(self.body[0].weight.dtype).contiguous(memory_format=torch.channels_last)
+        step = self.body(phi).to(x.dtype) * unit
         return clamp_between(x + step, lo, hi)
 
     def forward(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor,
