@@ -26,6 +26,7 @@ from __future__ import annotations
 import torch
 
 from .native import host_path
+from .selection import kth_smallest, lower_median
 from .window_max import max_filter
 
 __all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "quantisation_step", "sample_percentiles",
@@ -77,7 +78,7 @@ def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, method: st
     for i in range(b):
         vals = torch.cat([dh[i][mh[i]], dv[i][mv[i]]]).abs()
         if vals.numel() >= 16:
-            out[i] = _MAD_TO_STD * vals.median() / 6**0.5
+            out[i] = _MAD_TO_STD * lower_median(vals) / 6**0.5
     return out
 
 
@@ -144,7 +145,7 @@ def _haar_sigma(depth: torch.Tensor, observed: torch.Tensor) -> torch.Tensor:
     out = []
     for b in range(depth.shape[0]):
         v = hh[b][ok[b] > 0].abs()
-        out.append(v.median() / 0.6745 if v.numel() else depth.new_zeros(()))
+        out.append(lower_median(v) / 0.6745 if v.numel() else depth.new_zeros(()))
     return torch.stack(out) if out else depth.new_zeros(0)
 
 
@@ -238,7 +239,8 @@ def _quantiles_by_selection(v: torch.Tensor, q: torch.Tensor) -> torch.Tensor:
     the ``lerp`` are torch.quantile's own (``ranks = q·(n−1)`` in ``v``'s dtype). ``v`` 1-D without NaN."""
     ranks = q * (v.numel() - 1)
     below, above = ranks.to(torch.long), ranks.ceil().to(torch.long)
-    order = {k: v.kthvalue(k + 1).values for k in sorted(set(below.tolist()) | set(above.tolist()))}
+    ks = sorted(set(below.tolist()) | set(above.tolist()))
+    order = dict(zip(ks, kth_smallest(v, ks).to(v.device)))
     lo = torch.stack([order[k] for k in below.tolist()])
     hi = torch.stack([order[k] for k in above.tolist()])
     return lo.lerp(hi, (ranks - below).to(v.device))
@@ -331,7 +333,7 @@ def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma: float 
     if host_path(depth.device):
         offset = depth.new_zeros(b)
         for i in range(b):
-            offset[i] = depth[i][observed[i] > 0].detach().median()
+            offset[i] = lower_median(depth[i][observed[i] > 0].detach())
     else:
         offset = _lower_median(*_sorted_rows(depth.detach().flatten(1), observed.flatten(1) > 0))
     q = sample_percentiles(depth, observed) if percentiles is None else percentiles

@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 
 from ..config import StreamConfig
+from ..selection import lower_median
 from .matching import dilate
 
 __all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "depth_votes", "distances", "local_spread"]
@@ -122,7 +123,7 @@ def camera_moved(rgb: torch.Tensor, previous: torch.Tensor, reach: int = 2) -> t
 def color_change(rgb: torch.Tensor, previous: torch.Tensor, window: int) -> torch.Tensor:
     """(B,1,H,W): the window mean of the absolute colour change, each channel's median change removed."""
     diff = rgb - previous
-    diff = diff - diff.flatten(2).median(dim=2).values[..., None, None]
+    diff = diff - lower_median(diff.flatten(2))[..., None, None]
     num, den = _window_mean(diff.abs().mean(1, keepdim=True), window)
     return num / den
 

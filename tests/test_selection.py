@@ -1,0 +1,26 @@
+"""numpy's selection returns what torch.median / torch.kthvalue return, bit for bit (torch_depth_sr.selection)."""
+import pytest
+import torch
+
+from torch_depth_sr.selection import kth_smallest, lower_median
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("n", [1, 2, 7, 1000, 1001])
+def test_lower_median_and_kth_smallest_equal_torch(dtype, n):
+    g = torch.Generator().manual_seed(n)
+    v = torch.randn(n, generator=g, dtype=dtype).round(decimals=1)  # ties included
+    assert torch.equal(lower_median(v), v.median())
+    ks = sorted({0, n // 3, n - 1})
+    assert torch.equal(kth_smallest(v, ks), torch.stack([v.kthvalue(k + 1).values for k in ks]))
+    rows = torch.randn(2, 3, n, generator=g, dtype=dtype)
+    assert torch.equal(lower_median(rows), rows.median(-1).values)
+
+
+def test_nan_and_gradients_take_torch_path():
+    v = torch.tensor([1.0, float("nan"), 3.0, 2.0])
+    assert torch.isnan(lower_median(v))  # torch's answer; numpy would have sorted the NaN last
+    w = torch.tensor([3.0, 1.0, 2.0], requires_grad=True)
+    m = lower_median(w)
+    m.backward()
+    assert float(m.detach()) == 2.0 and w.grad.tolist() == [0.0, 0.0, 1.0]

