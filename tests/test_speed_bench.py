@@ -21,6 +21,14 @@ def test_measure_full_reports_stages_and_cg():
     assert len(row["cg_iterations"]) == 8 and row["peak_mb"] is not None
 
 
+def test_stream_row_times_its_step_against_a_cold_frame_in_turn():
+    row = measure("stream-fast", 24, 32, 1, repeats=2)
+    p = row["paired"]
+    assert len(p["steps"]) == len(p["colds"]) == 2 and p["step"] > 0 and p["cold"] > 0
+    assert p["ratio"] == pytest.approx(sum(a / b for a, b in zip(p["steps"], p["colds"])) / 2)  # median of two
+    assert "paired" not in measure("fast", 24, 32, 1, repeats=1)
+
+
 @pytest.mark.parametrize("method", ["bm-exact", "bm-refine", "x0-filter"])
 def test_measure_stage_rows(method):
     """The stage rows of the speed track (issue 13 item 5) run the model's own stage on its inputs."""

@@ -13,7 +13,8 @@ Times, side by side in one run and on the same synthetic inputs
   batch, same run).
 
 Each measurement is one warm-up call (a stream's: its cold first frame and ``STREAM_WARM_STEPS`` steps) then the
-median of ``repeats`` timed calls. By default every
+median of ``repeats`` timed calls. A stream row then times ``repeats`` rounds of a step and a cold frame of the same
+model in turn (``row["paired"]``, the table's ``step/cold``: the median of the rounds' ratios). By default every
 (method, size, batch) runs in its own fresh Python subprocess, so that its peak memory is honest:
 the child builds its inputs, resets the kernel's peak-RSS counter (``/proc/self/clear_refs`` ← 5),
 runs, and reports ``VmHWM − VmRSS`` at the reset, i.e. the peak resident memory the method added on
@@ -69,6 +70,11 @@ MODEL_PRESETS = {"full": "default", "fast": "fast", "best": "best", "full-fast":
 # layers (StreamConfig.layers, the fast tier's 1) only once its run has its full mean, max_frames (8) frames. The
 # warm-up steps' times are kept in the row (warmup_steps_seconds).
 STREAM_WARM_STEPS = 8
+# a stream row also times its step against a cold frame of the same model in turn, on the same machine load: after
+# its own timed steps (whose peak memory the row reports), ``repeats`` rounds of one step then one cold call
+# (row["paired"]: the medians and the median of the rounds' ratios, the figure of issue 28's step target). Three
+# calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine in two runs.
+STREAM_COLD = {"stream": "full", "stream-fast": "fast"}
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
 # "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240, the fast tier) once and reports its
@@ -272,15 +278,20 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
             _sync(device)
             times.append(time.perf_counter() - t0)
             infos.append(info)
+        # the stream's own peak, before the paired cold frames
+        peak = torch.cuda.max_memory_allocated() if cuda else _proc_status("VmHWM")
+        paired = _paired_rounds(method, run, y, rgb, device, n) if method in STREAM_COLD and n else None
     row = {"method": method, "height": height, "width": width, "batch": batch, "repeats": len(times),
            "seconds": statistics.median(times) if times else warm, "seconds_all": times, "warmup_seconds": warm}
     if warm_steps:
         row["warmup_steps_seconds"] = warm_steps
+    if paired:
+        row["paired"] = paired
     if cuda:
-        row["peak_mb"] = (torch.cuda.max_memory_allocated() - base) / 2**20
+        row["peak_mb"] = (peak - base) / 2**20
         row["peak_kind"] = "cuda_allocated_over_inputs"
     else:
-        hwm = _proc_status("VmHWM")
+        hwm = peak
         if reset and hwm is not None and base is not None:
             row["peak_mb"], row["peak_kind"] = max(0.0, hwm - base), "rss_over_inputs"
         else:
@@ -297,6 +308,23 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
     row["threads"] = torch.get_num_threads()
     row["loadavg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     return row
+
+
+def _paired_rounds(method: str, step, y: torch.Tensor, rgb: torch.Tensor, device: str, rounds: int) -> dict:
+    """``rounds`` rounds of one stream step then one cold frame of the same model (``STREAM_COLD``), each timed:
+    ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
+    cold = _make_runner(STREAM_COLD[method], device)
+    cold(y, rgb)  # its warm-up
+    _sync(device)
+    steps, colds = [], []
+    for _ in range(rounds):
+        for run, into in ((step, steps), (cold, colds)):
+            t0 = time.perf_counter()
+            run(y, rgb)
+            _sync(device)
+            into.append(time.perf_counter() - t0)
+    return {"step": statistics.median(steps), "cold": statistics.median(colds),
+            "ratio": statistics.median(a / b for a, b in zip(steps, colds)), "steps": steps, "colds": colds}
 
 
 def _measure_isolated(method, h, w, b, device, repeats, max_seconds, threads) -> dict:
@@ -395,10 +423,12 @@ def run_speed(args: argparse.Namespace) -> int:
                       "edges": r.get("post_stages", {}).get("snap", 0.0),
                       "refiner": r.get("post_stages", {}).get("refine", 0.0), "rest": st["rest"],
                       "cg it/layer": "/".join(str(i) for i in r["cg_iterations"])})
+        if r.get("paired"):
+            t["step/cold"] = r["paired"]["ratio"]
         table.append(t)
     cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "peak MB", "bm", "singular", "nonlocal", "cg",
             "edges", "refiner", "rest",
-            "cg it/layer", "load"]
+            "cg it/layer", "step/cold", "load"]
     meta = _metadata(device)
     meta.update(track="speed", threads=threads or torch.get_num_threads(), cpu_count=os.cpu_count(),
                 sizes=[list(s) for s in sizes], batches=list(batches), repeats=repeats, isolated=isolate,
