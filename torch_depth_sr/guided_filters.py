@@ -28,7 +28,7 @@ import torch.nn.functional as F
 from ._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw, check_same_shape
 from .errors import DepthSRError, ShapeError
 from .fill import pull_push
-from .native import host_path
+from .native import cpu_kernel, host_path
 
 __all__ = ["domain_transform_filter", "joint_bilateral_filter", "joint_bilateral_upsample", "limited_slopes"]
 
@@ -124,6 +124,10 @@ def _box_bounds(coords: torch.Tensor, radius: torch.Tensor, radius_max: float,
     n = coords.shape[dim]
     reach = min(int(math.floor(radius_max)), n - 1)  # no box reaches further: every step is >= 1
     pos = torch.arange(n, device=coords.device).view((n, 1) if dim == -2 else (n,))  # (H, 1) or (W,)
+    if reach <= _COUNT_MAX and host_path(coords.device) and not coords.requires_grad:
+        kernel = cpu_kernel("domain_kernel", "bounds_cpu")
+        if kernel is not None:
+            return kernel(coords, radius, reach, dim)
     if reach <= _COUNT_MAX:
         before = torch.zeros(coords.shape, dtype=torch.int16, device=coords.device)  # (B, 1, H, W)
         after = torch.zeros_like(before)
@@ -141,7 +145,13 @@ def _box_bounds(coords: torch.Tensor, radius: torch.Tensor, radius_max: float,
 
 
 def _box(values: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, dim: int) -> torch.Tensor:
-    """Mean of ``values`` (B,C,H,W) over the boxes ``lo <= j < hi`` along ``dim`` (cumulative sums)."""
+    """Mean of ``values`` (B,C,H,W) over the boxes ``lo <= j < hi`` along ``dim`` (cumulative sums); on the CPU
+    without gradient by the numba kernel (:func:`~torch_depth_sr.domain_kernel.box_cpu`, the same values)."""
+    if values.dtype == torch.float64 and host_path(values.device) and not (
+            torch.is_grad_enabled() and values.requires_grad):
+        kernel = cpu_kernel("domain_kernel", "box_cpu")
+        if kernel is not None:
+            return kernel(values, lo, hi, dim)
     csum = F.pad(torch.cumsum(values, dim=dim), (1, 0) if dim == -1 else (0, 0, 1, 0))  # one more along dim
     shape = values.shape
     total = csum.gather(dim, hi.expand(shape)) - csum.gather(dim, lo.expand(shape))  # (B, C, H, W)

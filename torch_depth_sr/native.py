@@ -1,5 +1,5 @@
 """The one loader of the compiled CPU kernels (numba): block matching, the singular test, the nonlocal terms, the
-edge steps' medians, the hole fill's passes.
+edge steps' medians, the hole fill's passes, the boxes of x⁰'s domain-transform filter.
 
 Each kernel module imports numba at its top; :func:`cpu_kernel` imports it on first use and returns the
 requested function, or None, so that the caller runs its torch path (same results, slower on a CPU). Without
@@ -50,8 +50,8 @@ _FAILED: Optional[str] = None  # why numba is unavailable, once known
 _CONFIGURED = False
 _LOG = logging.getLogger("torch_depth_sr")
 # the kernel modules (under torch_depth_sr) whose numba functions warmup compiles and the notice watches
-KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "edge_snap_kernel", "fill_kernel",
-                  "nonlocal_kernel", "singular_kernel")
+KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "domain_kernel", "edge_snap_kernel",
+                  "fill_kernel", "nonlocal_kernel", "singular_kernel")
 COMPILE_SECONDS = 13  # the kernels of a float32 forward: about 13 s of CPU (docs/measurements/numba-first-use/)
 _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per process; not during warmup
 
@@ -136,7 +136,7 @@ def cpu_kernel(module: str, name: str, required: bool = False) -> Optional[Calla
             _FAILED = f"numba could not be imported ({exc})"
             if not required:
                 warnings.warn(f"torch_depth_sr: {_FAILED}; the CPU kernels (block matching, singular test, "
-                              "nonlocal terms, edge steps, hole fill) fall back to the torch path (same results, "
+                              "nonlocal terms, edge steps, hole fill, x⁰ filter) fall back to the torch path (same results, "
                               "several times slower). `pip install numba` restores the fast path.", RuntimeWarning,
                               stacklevel=3)
     if required:

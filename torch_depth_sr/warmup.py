@@ -12,6 +12,7 @@ from .block_matching import block_match
 from .block_matching.refine import refine_matches
 from .edge_snap import refit_to_measurements, snap_to_sides
 from .fill import fill_holes_sided
+from .guided_filters import domain_transform_filter
 from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
@@ -57,8 +58,12 @@ def _warmup_steps(dtype: torch.dtype):
             fill_holes_sided(depth, (~hole).to(dtype), torch.rand(1, 3, 40, 40, generator=g, dtype=dtype),
                              kernel_size=7, choice_sigma_space=1.5)
 
+    def domain():  # x⁰'s colour-guided filter: its row and column boxes (in float64, whatever the dtype)
+        with torch.no_grad():
+            domain_transform_filter(x, rgb, trust)
+
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
-            ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill)]
+            ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill), ("x0 filter", domain)]
 
 
 def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),
