@@ -13,7 +13,7 @@ Times, side by side in one run and on the same synthetic inputs
   batch, same run).
 
 Each measurement is one warm-up call (a stream's: its cold first frame and ``STREAM_WARM_STEPS`` steps) then the
-median of ``repeats`` timed calls. A stream row then times ``repeats`` rounds of a step and a cold frame of the same
+median of ``repeats`` timed calls. A stream row then times ``repeats`` rounds of steps and cold frames of the same
 model in turn (``row["paired"]``, the table's ``step/cold``: the median of the rounds' ratios). By default every
 (method, size, batch) runs in its own fresh Python subprocess, so that its peak memory is honest:
 the child builds its inputs, resets the kernel's peak-RSS counter (``/proc/self/clear_refs`` ← 5),
@@ -71,9 +71,10 @@ MODEL_PRESETS = {"full": "default", "fast": "fast", "best": "best", "full-fast":
 # warm-up steps' times are kept in the row (warmup_steps_seconds).
 STREAM_WARM_STEPS = 8
 # a stream row also times its step against a cold frame of the same model in turn, on the same machine load: after
-# its own timed steps (whose peak memory the row reports), ``repeats`` rounds of one step then one cold call
-# (row["paired"]: the medians and the median of the rounds' ratios, the figure of issue 28's step target). Three
-# calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine in two runs.
+# its own timed steps (whose peak memory the row reports), ``repeats`` rounds of two steps then two cold calls, the
+# second of each timed (row["paired"]: the medians and the median of the rounds' ratios, the figure of issue 28's
+# step target). Three calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine
+# in two runs; timing the first call after the other kind made a 1376x1088 step 15 % slower than back to back.
 STREAM_COLD = {"stream": "full", "stream-fast": "fast"}
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
@@ -311,14 +312,16 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
 
 
 def _paired_rounds(method: str, step, y: torch.Tensor, rgb: torch.Tensor, device: str, rounds: int) -> dict:
-    """``rounds`` rounds of one stream step then one cold frame of the same model (``STREAM_COLD``), each timed:
-    ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
+    """``rounds`` rounds of two stream steps then two cold frames of the same model (``STREAM_COLD``), the second of
+    each timed: ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
     cold = _make_runner(STREAM_COLD[method], device)
     cold(y, rgb)  # its warm-up
     _sync(device)
     steps, colds = [], []
     for _ in range(rounds):
         for run, into in ((step, steps), (cold, colds)):
+            run(y, rgb)  # untimed: the first call after the other kind faults its freed pages in again (glibc
+            _sync(device)  # returns them to the system), which a stream's back-to-back steps do not
             t0 = time.perf_counter()
             run(y, rgb)
             _sync(device)
