@@ -1,5 +1,5 @@
 """The one loader of the compiled CPU kernels (numba): block matching, the singular test, the nonlocal terms, the
-edge steps' medians, the hole fill's passes, the boxes of x⁰'s domain-transform filter.
+edge steps' medians, the hole fill's passes, the boxes of x⁰'s domain-transform filter, a stream's window means.
 
 Each kernel module imports numba at its top; :func:`cpu_kernel` imports it on first use and returns the
 requested function, or None, so that the caller runs its torch path (same results, slower on a CPU). Without
@@ -51,7 +51,7 @@ _CONFIGURED = False
 _LOG = logging.getLogger("torch_depth_sr")
 # the kernel modules (under torch_depth_sr) whose numba functions warmup compiles and the notice watches
 KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "domain_kernel", "edge_snap_kernel",
-                  "fill_kernel", "nonlocal_kernel", "singular_kernel")
+                  "fill_kernel", "nonlocal_kernel", "singular_kernel", "stream.box_kernel")
 COMPILE_SECONDS = 13  # the kernels of a float32 forward: about 13 s of CPU (docs/measurements/numba-first-use/)
 _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per process; not during warmup
 

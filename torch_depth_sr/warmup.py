@@ -17,6 +17,7 @@ from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
 from .singular import detect_singular
+from .stream.change import local_spread
 
 __all__ = ["warmup"]
 
@@ -62,8 +63,13 @@ def _warmup_steps(dtype: torch.dtype):
         with torch.no_grad():
             domain_transform_filter(x, rgb, trust)
 
+    def stream_means():  # a stream's window means (its change test and state), in the frames' dtype
+        with torch.no_grad():
+            local_spread(x, trust, x, 3)
+
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
-            ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill), ("x0 filter", domain)]
+            ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill), ("x0 filter", domain),
+            ("stream means", stream_means)]
 
 
 def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),

@@ -34,6 +34,7 @@ import torch
 import torch.nn.functional as F
 
 from ..config import StreamConfig
+from ..native import cpu_kernel, host_path
 from ..selection import lower_median
 from .matching import dilate
 
@@ -46,7 +47,12 @@ def _box_mean(v: torch.Tensor, window: int) -> torch.Tensor:
     """The mean of ``v`` (B,C,H,W) over the ``window × window`` window, zero padding (as ``avg_pool2d`` with
     ``count_include_pad``), from cumulative sums in float64 along rows then columns: a few passes over the image
     whatever the window, where ``avg_pool2d`` reads the whole window at every pixel, and exact to the rounding of
-    the result."""
+    the result. On the CPU without gradient by the numba kernel (:mod:`~torch_depth_sr.stream.box_kernel`, the same
+    sums: the same means)."""
+    if window % 2 == 1 and host_path(v.device) and not (torch.is_grad_enabled() and v.requires_grad):
+        kernel = cpu_kernel("stream.box_kernel", "box_mean_cpu")
+        if kernel is not None:
+            return kernel(v, window)
     p = window // 2
     d = F.pad(v.double(), (p + 1, p))
     c = d.cumsum(-1)
