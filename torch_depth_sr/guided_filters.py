@@ -124,11 +124,10 @@ def _box_bounds(coords: torch.Tensor, radius: torch.Tensor, radius_max: float,
     n = coords.shape[dim]
     reach = min(int(math.floor(radius_max)), n - 1)  # no box reaches further: every step is >= 1
     pos = torch.arange(n, device=coords.device).view((n, 1) if dim == -2 else (n,))  # (H, 1) or (W,)
-    if reach <= _COUNT_MAX and host_path(coords.device) and not coords.requires_grad:
-        kernel = cpu_kernel("domain_kernel", "bounds_cpu")
-        if kernel is not None:
-            return kernel(coords, radius, reach, dim)
     if reach <= _COUNT_MAX:
+        kernel = cpu_kernel("domain_kernel", "bounds_cpu") if host_path(coords.device) else None
+        if kernel is not None:  # the same counts (box ends are integers: no gradient to keep)
+            return kernel(coords, radius, reach, dim)
         before = torch.zeros(coords.shape, dtype=torch.int16, device=coords.device)  # (B, 1, H, W)
         after = torch.zeros_like(before)
         for k in range(1, reach + 1):

@@ -136,9 +136,9 @@ def cpu_kernel(module: str, name: str, required: bool = False) -> Optional[Calla
             _FAILED = f"numba could not be imported ({exc})"
             if not required:
                 warnings.warn(f"torch_depth_sr: {_FAILED}; the CPU kernels (block matching, singular test, "
-                              "nonlocal terms, edge steps, hole fill, x⁰ filter) fall back to the torch path (same "
-                              "results, several times slower). `pip install numba` restores the fast path.", RuntimeWarning,
-                              stacklevel=3)
+                              "nonlocal terms, edge steps, hole fill, x⁰ filter, stream window means) fall back to "
+                              "the torch path (same results, several times slower). `pip install numba` restores "
+                              "the fast path.", RuntimeWarning, stacklevel=3)
     if required:
         raise DepthSRError(f"the numba CPU kernels are unavailable: {_FAILED}. Use backend='auto' or 'torch'.")
     return None
