@@ -297,9 +297,11 @@ def test_the_gpu_report_table():
     rows = [{"method": "default", "size": "480x640", "batch": 1, "ms_per_frame": 12.345, "peak_mb": 1500.0,
              "graph": "captured", "graph_ms_per_frame": 8.0, "graph_max_abs_diff": 0.0},
             {"method": "kornia-jbf9", "size": "480x640", "batch": 8, "ms_per_frame": 0.5, "peak_mb": 20.0},
+            {"method": "stream-fast", "size": "480x640", "batch": 1, "ms_per_frame": 6.0, "step_vs_cold": 0.5},
             {"method": "best", "size": "1088x1376", "batch": 8, "error": "out of memory: CUDA"}]
     lines = format_table(rows).splitlines()
     assert lines[0] == "| " + " | ".join(COLUMNS + ["error"]) + " |" and len(lines) == 2 + len(rows)
-    assert lines[2].startswith("| default | 480x640 | 1 | 12.3 | 1500 | captured | 8 | 0 |")
-    assert lines[4].endswith("| out of memory: CUDA |")
+    assert lines[2].startswith("| default | 480x640 | 1 | 12.3 |  | 1500 | captured | 8 | 0 |")
+    assert lines[4].startswith("| stream-fast | 480x640 | 1 | 6 | 0.5 |")
+    assert lines[5].endswith("| out of memory: CUDA |")
     assert format_table(rows[:1], header=False).count("\n") == 0

@@ -1,10 +1,13 @@
 """``python -m torch_depth_sr.evaluation.gpu_report``: time every speed tier on a CUDA GPU in one command.
 
 ``python -m torch_depth_sr.evaluation.gpu_report [--sizes 480x640 1088x1376] [--batch 1 8] [--out DIR]`` times, per
-size (height x width) and batch, the tiers ``fast``, ``default`` and ``best`` and kornia's ``joint_bilateral_blur``
-9x9 as the reference: warm-up calls, then the median ms per frame of ``--repeats`` calls timed with CUDA events, the
-peak memory (``torch.cuda.max_memory_allocated`` over what was allocated before), and for the default tier an
-attempt to capture its forward as a CUDA graph (static inputs) with the replay's ms per frame, or the error text.
+size (height x width) and batch, the tiers ``fast``, ``default`` and ``best``, a stream step of the fast and the
+default tier (``stream-fast``, ``stream``: :class:`~torch_depth_sr.StreamRestorer` on the scene of the tiers' frames
+with new noise every step, after its cold first frame and ``speed.STREAM_WARM_STEPS`` steps; ``step_vs_cold`` is the
+step's time over its tier's row) and kornia's ``joint_bilateral_blur`` 9x9 as the reference: warm-up calls, then the
+median ms per frame of ``--repeats`` calls timed with CUDA events, the peak memory
+(``torch.cuda.max_memory_allocated`` over what was allocated before), and for the default tier an attempt to capture
+its forward as a CUDA graph (static inputs) with the replay's ms per frame, or the error text.
 It prints a table and writes ``gpu_report.json`` and ``gpu_report.md`` under ``--out``. Without CUDA it prints one
 line and exits with status 2.
 
@@ -136,7 +139,9 @@ def profile(device: str, height: int, width: int, path: Path) -> dict:
 
 
 TIERS = ("fast", "default", "best")
-COLUMNS = ["method", "size", "batch", "ms_per_frame", "peak_mb", "graph", "graph_ms_per_frame", "graph_max_abs_diff"]
+STREAMS = {"stream-fast": "fast", "stream": "default"}  # a stream step and the tier whose model it runs
+COLUMNS = ["method", "size", "batch", "ms_per_frame", "step_vs_cold", "peak_mb", "graph", "graph_ms_per_frame",
+           "graph_max_abs_diff"]
 
 
 def _event_ms(fn, repeats: int, warmup: int) -> float:
@@ -196,25 +201,54 @@ def _kornia_jbf9(depth: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
     return kornia.filters.joint_bilateral_blur(depth, rgb, (9, 9), 0.1, (3.0, 3.0))
 
 
+def stream_step(model: DepthRestorer, depth: torch.Tensor, rgb: torch.Tensor, gt: torch.Tensor, seed: int = 1):
+    """A function that feeds a new :class:`~torch_depth_sr.StreamRestorer` of ``model`` the next frame of a static
+    scene: ``gt`` with new noise (σ = 5, as :func:`speed.make_inputs`) and ``depth``'s holes, on the inputs' device.
+    Its first call is the stream's cold frame; call it ``speed.STREAM_WARM_STEPS`` times more before timing steps."""
+    from ..stream import StreamRestorer
+
+    stream = StreamRestorer(model)
+    g = torch.Generator(device=depth.device).manual_seed(seed)
+    holes = depth <= 0
+
+    def step():
+        noise = 5.0 * torch.randn(depth.shape, generator=g, device=depth.device, dtype=depth.dtype)
+        return stream.step(torch.where(holes, torch.zeros_like(depth), (gt + noise).clamp_min(1.0)), rgb)
+
+    return step
+
+
 def measure_all(sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeats: int, warmup: int) -> list[dict]:
-    """One row per (method, size, batch) on ``cuda``: the tiers, then kornia's 9x9 joint bilateral filter."""
+    """One row per (method, size, batch) on ``cuda``: the tiers, the stream steps, then kornia's 9x9 joint bilateral
+    filter."""
     rows = []
     models = {tier: DepthRestorer.from_preset(tier).to("cuda").eval() for tier in TIERS}
     for h, w in sizes:
         for b in batches:
-            depth, rgb, _ = speed.make_inputs(h, w, b)
-            depth, rgb = depth.to("cuda"), rgb.to("cuda")
+            depth, rgb, gt = speed.make_inputs(h, w, b)
+            depth, rgb, gt = depth.to("cuda"), rgb.to("cuda"), gt.to("cuda")
             runs = {tier: (lambda m=m: m(depth, rgb)) for tier, m in models.items()}
+            runs.update({name: stream_step(models[tier], depth, rgb, gt) for name, tier in STREAMS.items()})
             runs["kornia-jbf9"] = lambda: _kornia_jbf9(depth, rgb)
+            cold = {}
             for name, run in runs.items():
                 row = {"method": name, "size": f"{h}x{w}", "batch": b}
                 try:
                     with torch.no_grad():
+                        for _ in range(1 + speed.STREAM_WARM_STEPS if name in STREAMS else 0):
+                            run()  # the stream's cold first frame and the steps that fill its state
                         row["ms_per_frame"] = _event_ms(run, repeats, warmup) / b
                         row["peak_mb"] = _peak_mb(run)
                 except torch.cuda.OutOfMemoryError as exc:
                     row["error"] = f"out of memory: {str(exc).splitlines()[0]}"[:300]
                     torch.cuda.empty_cache()
+                except Exception as exc:  # a method that fails on the GPU is a result to report; the others go on
+                    first = (str(exc).strip().splitlines() or [""])[0]
+                    row["error"] = f"{type(exc).__name__}: {first}"[:300]
+                if name in TIERS and "error" not in row:
+                    cold[name] = row["ms_per_frame"]
+                if name in STREAMS and "error" not in row and STREAMS[name] in cold:
+                    row["step_vs_cold"] = row["ms_per_frame"] / cold[STREAMS[name]]
                 if name == "default" and "error" not in row:
                     row.update(_graph(models["default"], depth, rgb, repeats, warmup))
                 rows.append(row)
