@@ -87,8 +87,9 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
     offsets = [(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)]
     spatial = None
     if sigma_space is not None:
-        spatial = torch.tensor([-(dy * dy + dx * dx) / (2.0 * sigma_space ** 2) for dy, dx in offsets],
-                               dtype=x.dtype, device=x.device).exp().view(1, -1, 1, 1)
+        d = torch.arange(-r, r + 1, dtype=torch.float64, device=x.device)  # on the device: a CUDA graph captures it
+        squared = (d[:, None] * d[:, None] + d[None, :] * d[None, :]).flatten()  # the offsets' order, row-major
+        spatial = (-squared / (2.0 * sigma_space ** 2)).to(x.dtype).exp().view(1, -1, 1, 1)
     kernel = _kernel("sided_median_cpu", x, guide)
     if kernel is not None:
         return kernel(x, guide, r, sigma_color, spatial)
@@ -238,7 +239,8 @@ def _refit_torch(x: torch.Tensor, y: torch.Tensor, observed: torch.Tensor, guide
     # column, several times faster); the colour with its channels last, one row per padded pixel
     hp, wp = h + 2 * r, w + 2 * r
     colour_rows = gp.expand(b, -1, hp, wp).permute(0, 2, 3, 1).reshape(b * hp * wp, -1)
-    offsets = torch.tensor([dy * wp + dx for dy in range(-r, r + 1) for dx in range(-r, r + 1)], device=x.device)
+    d = torch.arange(-r, r + 1, device=x.device)  # on the device, not copied from the host (a CUDA graph captures it)
+    offsets = (d[:, None] * wp + d[None, :]).flatten()  # dy * wp + dx, row-major
     out = x.clone(memory_format=torch.contiguous_format)
     flat_out, flat_x = out.view(-1), x.reshape(-1)
     if pixels is None:

@@ -315,7 +315,7 @@ def _fill_every_pixel(p: _FillPlanes, gapped: torch.Tensor, shares: torch.Tensor
     bi, yi, xi = pixel // (p.h * p.w), pixel // p.w % p.h, pixel % p.w
     x, conf, filled = p.x.reshape(-1), p.conf.reshape(-1), p.filled.reshape(-1)
     gapped, shares = gapped.reshape(-1), shares.reshape(-1)
-    weak_allowed = torch.tensor(allow_weak, device=p.x.device)
+    weak_allowed = torch.full((), bool(allow_weak), device=p.x.device)  # a fill, not a host copy: graphs capture it
     for _ in range(max(1, passes) + 1):
         parts = [_fill_pixels(p, bi[i:i + _FILL_CHUNK], yi[i:i + _FILL_CHUNK], xi[i:i + _FILL_CHUNK])
                  for i in range(0, n, _FILL_CHUNK)]

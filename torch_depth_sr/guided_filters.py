@@ -28,7 +28,7 @@ import torch.nn.functional as F
 from ._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw, check_same_shape
 from .errors import DepthSRError, ShapeError
 from .fill import pull_push
-from .native import cpu_kernel, host_path
+from .native import cpu_kernel, host_path, on_device
 
 __all__ = ["domain_transform_filter", "joint_bilateral_filter", "joint_bilateral_upsample", "limited_slopes"]
 
@@ -61,7 +61,7 @@ def _resolve_mask(depth: torch.Tensor, mask: torch.Tensor | None, name: str = "m
 
 def _per_sample(value: float | torch.Tensor, batch: int, ref: torch.Tensor, name: str) -> torch.Tensor:
     """A float or a (B,) tensor as a (B,1,1,1) tensor of ``ref``'s dtype/device, checked > 0."""
-    t = torch.as_tensor(value, dtype=ref.dtype, device=ref.device)
+    t = on_device(value, ref.dtype, ref.device)
     check_per_sample(t, name, batch)
     if t.ndim == 0:
         t = t.expand(batch)

@@ -74,6 +74,15 @@ def host_path(device: torch.device) -> bool:
     return device.type == "cpu" and not device_path_forced()
 
 
+def on_device(value, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    """``value`` (a Python number, or a tensor) as a tensor of ``dtype`` on ``device``. A number is filled in on the
+    device rather than copied from the host: a CUDA graph cannot capture a copy from pageable host memory, which
+    ``torch.as_tensor(number, device=...)`` is. The same value as ``as_tensor`` (one rounding to ``dtype``)."""
+    if isinstance(value, torch.Tensor):
+        return value.to(dtype=dtype, device=device)
+    return torch.full((), value, dtype=dtype, device=device)
+
+
 def _configure_numba() -> None:
     global _CONFIGURED
     if _CONFIGURED:

@@ -18,7 +18,7 @@ import torch
 
 from ._checks import check_4d, check_same_shape
 from .block_matching import BlockMatches, gather_neighbors
-from .native import cpu_kernel, host_path
+from .native import cpu_kernel, host_path, on_device
 
 __all__ = ["nonlocal_gradient", "nonlocal_terms", "nonlocal_value_prior"]
 
@@ -167,7 +167,7 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
     tracked = torch.is_grad_enabled() and (x.requires_grad or matches.weight.requires_grad
                                            or (grad_x is not None and grad_x.requires_grad))
     if range_sigma is not None:
-        range_sigma = torch.as_tensor(range_sigma, dtype=x.dtype, device=x.device)
+        range_sigma = on_device(range_sigma, x.dtype, x.device)
     kernel = None
     if backend == "auto" and not tracked and host_path(x.device) and x.dtype in (torch.float32, torch.float64):
         kernel = _kernel()

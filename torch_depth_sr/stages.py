@@ -18,6 +18,7 @@ from torch import nn
 from .block_matching import BlockMatches, block_match, refine_matches
 from .block_matching._common import candidates_everywhere
 from .config import BlockMatchingConfig, SingularConfig, SolverConfig
+from .native import on_device
 from .observation import Observation
 from .operators import laplacian
 from .singular import detect_singular, neighbour_support, supported_or_line
@@ -127,7 +128,7 @@ def supported_pixels(y: torch.Tensor, observed: torch.Tensor, grid_step: torch.T
     rule = _SUPPORT_RULES[settings.line_support]
     with torch.no_grad():
         # y is in units of the scale, which is the noise σ̂ unless a floor of the scale policy took over
-        tol = torch.as_tensor(settings.support_tol, dtype=y.dtype, device=y.device)
+        tol = on_device(settings.support_tol, y.dtype, y.device)
         # neighbours one grid step apart lie on the same surface (slanted, clean)
         tol = torch.maximum(tol, 1.01 * grid_step.to(y))
         return rule(y, observed, tol, settings)

@@ -64,8 +64,10 @@ def block_match_torch(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: O
     half = lat[lat.index(0):]  # dy >= 0
     n_h = len(half)
     n_off = g * g  # candidates per pixel: rows 0..n_h-1 of the key grid direct, n_h.. mirrored
-    offs = torch.tensor(lat, device=dev)
-    dy_grid = torch.tensor(half + [-d for d in half[1:]], device=dev)  # (2n_h−1,)
+    # the offsets made on the device (aranges, not a copy from the host, which a CUDA graph cannot capture)
+    offs = torch.arange(lat[0], lat[-1] + 1, lat[1] - lat[0] if g > 1 else 1, device=dev)
+    dy_half = offs[lat.index(0):]
+    dy_grid = torch.cat([dy_half, -dy_half[1:]])  # (2n_h−1,): 0, s, 2s, ..., −s, −2s, ...
     dx_grid = torch.cat([offs.expand(n_h, g), -offs.expand(n_h - 1, g)])  # (2n_h−1, G)
     oid_grid = (dy_grid[:, None] + big_r) * s + dx_grid + big_r  # (2n_h−1, G)
     centre = lat.index(0)

@@ -6,8 +6,8 @@ default tier (``stream-fast``, ``stream``: :class:`~torch_depth_sr.StreamRestore
 with new noise every step, after its cold first frame and ``speed.STREAM_WARM_STEPS`` steps; ``step_vs_cold`` is the
 step's time over its tier's row) and kornia's ``joint_bilateral_blur`` 9x9 as the reference: warm-up calls, then the
 median ms per frame of ``--repeats`` calls timed with CUDA events, the peak memory
-(``torch.cuda.max_memory_allocated`` over what was allocated before), and for the default tier an attempt to capture
-its forward as a CUDA graph (static inputs) with the replay's ms per frame, or the error text.
+(``torch.cuda.max_memory_allocated`` over what was allocated before), and for each tier an attempt to capture its
+forward as a CUDA graph (static inputs) with the replay's ms per frame, or the error text and where it arose.
 It prints a table and writes ``gpu_report.json`` and ``gpu_report.md`` under ``--out``. Without CUDA it prints one
 line and exits with status 2.
 
@@ -33,6 +33,7 @@ import argparse
 import json
 import statistics
 import time
+import traceback
 from pathlib import Path
 from typing import Optional, Sequence
 
@@ -192,7 +193,9 @@ def _graph(model, depth: torch.Tensor, rgb: torch.Tensor, repeats: int, warmup: 
         return {"graph": "captured", "graph_ms_per_frame": ms / depth.shape[0], "graph_max_abs_diff": diff}
     except Exception as exc:  # any failure of the capture is a result to report, not a crash
         first = (str(exc).strip().splitlines() or [""])[0]
-        return {"graph": f"failed: {type(exc).__name__}: {first}"[:300]}
+        ours = [f for f in traceback.extract_tb(exc.__traceback__) if "torch_depth_sr/" in f.filename]
+        at = f" (at {ours[-1].filename.split('torch_depth_sr/')[-1]}:{ours[-1].lineno})" if ours else ""
+        return {"graph": f"failed{at}: {type(exc).__name__}: {first}"[:300]}
 
 
 def _kornia_jbf9(depth: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
@@ -249,8 +252,8 @@ def measure_all(sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeat
                     cold[name] = row["ms_per_frame"]
                 if name in STREAMS and "error" not in row and STREAMS[name] in cold:
                     row["step_vs_cold"] = row["ms_per_frame"] / cold[STREAMS[name]]
-                if name == "default" and "error" not in row:
-                    row.update(_graph(models["default"], depth, rgb, repeats, warmup))
+                if name in TIERS and "error" not in row:
+                    row.update(_graph(models[name], depth, rgb, repeats, warmup))
                 rows.append(row)
                 print(format_table([row], header=not rows[:-1]), flush=True)
     return rows
