@@ -21,8 +21,9 @@ Layout of the package:
 * ``reference.py`` — :func:`block_match_reference`, the unfold oracle (tests, small images);
 * ``cpu_exact.py`` — the exact search on the CPU, a numba kernel (running top-k over the window);
 * ``torch_search.py`` — the exact search on any device, in torch (GPU; CPU when numba is missing);
-* ``refine.py`` / ``refine_cpu.py`` — :func:`refine_matches`, the re-matching search: the previous matches,
-  optionally the neighbours' (PatchMatch propagation) and the window's offsets on a lattice, ranked exactly.
+* ``refine.py`` / ``refine_cpu.py`` / ``refine_torch.py`` — :func:`refine_matches`, the re-matching search: the
+  previous matches, optionally the neighbours' (PatchMatch propagation) and the window's offsets on a lattice,
+  ranked exactly; the CPU kernel and its torch twin for the other devices (the same candidates).
 
 The numba kernels are loaded by :mod:`torch_depth_sr.native` (one warning per process without numba).
 

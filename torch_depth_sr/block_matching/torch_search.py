@@ -16,7 +16,7 @@ import torch.nn.functional as F
 from ..errors import DepthSRError
 from ._common import index_from_offsets, lattice
 
-__all__ = ["block_match_torch"]
+__all__ = ["block_match_torch", "decode_keys", "encode_keys", "smallest_keys", "top_keys"]
 
 _INT64_MAX = np.iinfo(np.int64).max
 
@@ -29,7 +29,7 @@ _INT64_MAX = np.iinfo(np.int64).max
 _SELECT_CHOICES = ("topk", "split", "sort")
 
 
-def _smallest_keys(keys: torch.Tensor, k: int, how: str = "split") -> torch.Tensor:
+def smallest_keys(keys: torch.Tensor, k: int, how: str = "split") -> torch.Tensor:
     """``(B, P, N)`` int64 keys -> ``(B, P, k)``: the ``k`` smallest of every row, ascending."""
     n = keys.shape[2]
     if how == "topk" or (how == "split" and (n < 400 or n <= 2 * k)):
@@ -45,7 +45,43 @@ def _smallest_keys(keys: torch.Tensor, k: int, how: str = "split") -> torch.Tens
 def block_match_torch(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
                       block_size: int, search_window: int, k: int, rho: torch.Tensor, include_self: bool,
                       chunk_rows: Optional[int], stride: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """All offsets of a band of rows at once; the mirrored half read back from the other half.
+    """``(dist, index)`` (B, k, H, W): the ``k`` best blocks among the offsets of the ``stride`` lattice (see
+    :func:`top_keys`)."""
+    top = top_keys(depth, rgb, trust, block_size, search_window, k, rho, include_self, chunk_rows, stride)
+    return decode_keys(top, search_window, depth.dtype)
+
+
+def offset_bits(search_window: int) -> int:
+    """The mask of the low bits of a key that hold the offset id ``(dy+R)·S + (dx+R)``."""
+    s = search_window
+    return (1 << max(1, (s * s - 1).bit_length())) - 1
+
+
+def encode_keys(dist: torch.Tensor, oid: torch.Tensor, search_window: int) -> torch.Tensor:
+    """int64 keys of non-negative distances and their offset ids: the float64 bit pattern of the distance with the
+    id in its low bits (a float32 distance leaves them zero; a float64 one loses them), so that keys order as
+    (distance, id) pairs do."""
+    low_mask = offset_bits(search_window)
+    keys = dist.to(torch.float64).view(torch.int64)
+    if dist.dtype == torch.float64:
+        keys = keys & ~low_mask
+    return keys | oid
+
+
+def decode_keys(keys: torch.Tensor, search_window: int, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(dist, index)`` from keys (B, k, H, W): the distances in ``dtype`` and the flat indices of the blocks."""
+    low_mask = offset_bits(search_window)
+    h, w = keys.shape[-2:]
+    dist = (keys & ~low_mask).view(torch.float64).to(dtype)
+    return dist.contiguous(), index_from_offsets(keys & low_mask, search_window, h, w)
+
+
+def top_keys(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
+             block_size: int, search_window: int, k: int, rho: torch.Tensor, include_self: bool,
+             chunk_rows: Optional[int], stride: int) -> torch.Tensor:
+    """The ``k`` smallest keys (:func:`encode_keys`) per pixel, (B, k, H, W) int64, ascending: all offsets of a band
+    of rows at once; the mirrored half read back from the other half. Where fewer than ``k`` offsets of the
+    lattice lie in the image, the last keys are ``_INT64_MAX`` (no candidate).
 
     The distance is symmetric, ``d(i, i + o) = d(i + o, i)``, and so are the box sums that give it
     (same pixels, same order). Distances are computed for the offsets with ``dy >= 0`` only, over the
@@ -58,7 +94,7 @@ def block_match_torch(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: O
     nb = float(block_size * block_size)
     dev = depth.device
     cdt = torch.float64 if depth.dtype == torch.float64 else torch.float32
-    low_mask = (1 << max(1, (s * s - 1).bit_length())) - 1
+    low_mask = offset_bits(search_window)
     lat = lattice(big_r, stride)  # symmetric about 0
     g = len(lat)
     half = lat[lat.index(0):]  # dy >= 0
@@ -145,8 +181,6 @@ def block_match_torch(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: O
         row_ok = (ys >= 0) & (ys < h)
         keys.masked_fill_(~(row_ok[:, None, :, None] & col_ok[None]), _INT64_MAX)
         keys[..., 0, centre] = oid_grid[0, centre] if include_self else _INT64_MAX
-        top = _smallest_keys(keys.view(bsz, rows * w, n_off), k)  # (B, rows·W, k)
+        top = smallest_keys(keys.view(bsz, rows * w, n_off), k)  # (B, rows·W, k)
         top_all[:, :, h0:h1] = top.transpose(1, 2).reshape(bsz, k, rows, w)
-    oid_top = top_all & low_mask
-    dist = (top_all & ~low_mask).view(torch.float64).to(depth.dtype)
-    return dist.contiguous(), index_from_offsets(oid_top, search_window, h, w)
+    return top_all

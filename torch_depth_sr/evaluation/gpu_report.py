@@ -106,8 +106,8 @@ def selection_times(device: str, sizes: Sequence[tuple[int, int]], batches: Sequ
             expected = torch.sort(keys, dim=2).values[..., :c.k]
             row = {"size": f"{w}x{h}", "batch": b}
             for how in torch_search._SELECT_CHOICES:
-                same = torch.equal(torch_search._smallest_keys(keys, c.k, how), expected)
-                row[how] = _timed(lambda: torch_search._smallest_keys(keys, c.k, how), device, repeats)
+                same = torch.equal(torch_search.smallest_keys(keys, c.k, how), expected)
+                row[how] = _timed(lambda: torch_search.smallest_keys(keys, c.k, how), device, repeats)
                 row[how + "_exact"] = same
             rows.append(row)
             del keys, expected
