@@ -208,8 +208,9 @@ def _masked_percentiles(values: torch.Tensor, keep: torch.Tensor, out: torch.Ten
     step = torch.where(n < 16_000_000, torch.ones_like(n), (n // 1_000_000).clamp_min(1))
     keep = keep & ((keep.cumsum(1) - 1) % step == 0)
     rows, m = _sorted_rows(values.to(dt), keep)
-    q = torch.full((2,), 0.99, dtype=dt, device=values.device)  # filled on the device: a CUDA graph captures it
-    q[0] = 0.01
+    # filled on the device, not copied from the host (nor set item by item, which copies too): a graph captures it
+    q = torch.stack([torch.full((), 0.01, dtype=dt, device=values.device),
+                     torch.full((), 0.99, dtype=dt, device=values.device)])
     ranks = q[None] * (m - 1).clamp_min(0).to(dt)[:, None]  # (B, 2), as q * (numel - 1)
     below, above = ranks.to(torch.long), ranks.ceil().to(torch.long)
     p = rows.gather(1, below).lerp(rows.gather(1, above), ranks - below)

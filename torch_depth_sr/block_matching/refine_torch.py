@@ -91,7 +91,10 @@ def refine_torch(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Option
     dy = torch.div(prev, w, rounding_mode="floor") - torch.div(pixel, w, rounding_mode="floor")
     dx = prev % w - pixel % w
     oid = (dy + big_r) * s + dx + big_r
-    usable = (dy.abs() <= big_r) & (dx.abs() <= big_r)
+    rows, cols = torch.div(pixel, w, rounding_mode="floor"), pixel % w
+    # in the window and in the image (a stream's kept matches can point elsewhere), as the CPU kernel checks
+    usable = ((dy.abs() <= big_r) & (dx.abs() <= big_r) & (rows + dy >= 0) & (rows + dy < h) & (cols + dx >= 0)
+              & (cols + dx < w))
     if not include_self:
         usable &= oid != big_r * s + big_r
     if lattice > 0:  # the lattice search scores these itself

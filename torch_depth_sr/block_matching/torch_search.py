@@ -180,7 +180,10 @@ def top_keys(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[t
         ys = torch.arange(h0, h1, device=dev)[:, None] + dy_grid  # (rows, 2n_h−1)
         row_ok = (ys >= 0) & (ys < h)
         keys.masked_fill_(~(row_ok[:, None, :, None] & col_ok[None]), _INT64_MAX)
-        keys[..., 0, centre] = oid_grid[0, centre] if include_self else _INT64_MAX
+        if include_self:
+            keys[..., 0, centre] = oid_grid[0, centre]
+        else:  # a fill, not an item set from a host number (that copies it to the device; a graph cannot capture it)
+            keys[..., 0, centre].fill_(_INT64_MAX)
         top = smallest_keys(keys.view(bsz, rows * w, n_off), k)  # (B, rows·W, k)
         top_all[:, :, h0:h1] = top.transpose(1, 2).reshape(bsz, k, rows, w)
     return top_all

@@ -204,18 +204,22 @@ def _kornia_jbf9(depth: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
     return kornia.filters.joint_bilateral_blur(depth, rgb, (9, 9), 0.1, (3.0, 3.0))
 
 
-def stream_step(model: DepthRestorer, depth: torch.Tensor, rgb: torch.Tensor, gt: torch.Tensor, seed: int = 1):
+def stream_step(model: DepthRestorer, depth: torch.Tensor, rgb: torch.Tensor, gt: torch.Tensor, seed: int = 1,
+                noise_device: Optional[str] = None):
     """A function that feeds a new :class:`~torch_depth_sr.StreamRestorer` of ``model`` the next frame of a static
     scene: ``gt`` with new noise (σ = 5, as :func:`speed.make_inputs`) and ``depth``'s holes, on the inputs' device.
-    Its first call is the stream's cold frame; call it ``speed.STREAM_WARM_STEPS`` times more before timing steps."""
+    Its first call is the stream's cold frame; call it ``speed.STREAM_WARM_STEPS`` times more before timing steps.
+    The noise is drawn on ``noise_device`` (default: the inputs'; ``"cpu"`` gives the same frames on every device,
+    for comparisons, at the price of a copy per step)."""
     from ..stream import StreamRestorer
 
     stream = StreamRestorer(model)
-    g = torch.Generator(device=depth.device).manual_seed(seed)
+    noise_device = noise_device or depth.device
+    g = torch.Generator(device=noise_device).manual_seed(seed)
     holes = depth <= 0
 
     def step():
-        noise = 5.0 * torch.randn(depth.shape, generator=g, device=depth.device, dtype=depth.dtype)
+        noise = 5.0 * torch.randn(depth.shape, generator=g, device=noise_device, dtype=depth.dtype).to(depth.device)
         return stream.step(torch.where(holes, torch.zeros_like(depth), (gt + noise).clamp_min(1.0)), rgb)
 
     return step

@@ -6,7 +6,8 @@ within 0.01 depth units, and the RMSE of each against the ground truth.
     python docs/measurements/h200-2026-12-04/agreement.py --compare .gpuref         # where CUDA is
 
 Inputs: the speed track's synthetic frames (``speed.make_inputs``, 480x640, batch 2, σ = 5, 5 % holes); the stream
-is ``gpu_report.stream_step`` for 10 frames of the fast tier.
+is ``gpu_report.stream_step`` for 10 frames of the fast tier (noise drawn on the CPU: the same frames on both
+devices; the first run of 2026-12-04 drew it on each device, so its stream row compared different frames).
 """
 import argparse
 from pathlib import Path
@@ -26,7 +27,8 @@ def outputs(device: str) -> dict:
     with torch.no_grad():
         for tier in TIERS:
             out[tier] = DepthRestorer.from_preset(tier).to(device).eval()(depth, rgb).cpu()
-        step = gpu_report.stream_step(DepthRestorer.from_preset("fast").to(device).eval(), depth, rgb, gt)
+        step = gpu_report.stream_step(DepthRestorer.from_preset("fast").to(device).eval(), depth, rgb, gt,
+                                      noise_device="cpu")  # the same frames on both devices
         for _ in range(STREAM_FRAMES):
             last = step()
         out["stream-fast"] = last.cpu()
