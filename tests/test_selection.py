@@ -1,8 +1,9 @@
-"""numpy's selection returns what torch.median / torch.kthvalue return, bit for bit (torch_depth_sr.selection)."""
+"""numpy's selection returns what torch.median / torch.kthvalue / torch.unique return, bit for bit
+(torch_depth_sr.selection)."""
 import pytest
 import torch
 
-from torch_depth_sr.selection import kth_smallest, lower_median
+from torch_depth_sr.selection import distinct, kth_smallest, lower_median
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
@@ -24,3 +25,14 @@ def test_nan_and_gradients_take_torch_path():
     m = lower_median(w)
     m.backward()
     assert float(m.detach()) == 2.0 and w.grad.tolist() == [0.0, 0.0, 1.0]
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_distinct_equals_torch_unique(dtype):
+    g = torch.Generator().manual_seed(5)
+    for v in (torch.randn(5000, generator=g, dtype=dtype), torch.randn(5000, generator=g, dtype=dtype).round(),
+              torch.zeros(0, dtype=dtype), torch.tensor([-0.0, 0.0, 2.0, 2.0], dtype=dtype)):
+        out = distinct(v)
+        assert out.dtype == v.dtype and torch.equal(out, torch.unique(v))
+    nan = torch.tensor([1.0, float("nan"), 1.0], dtype=dtype)
+    assert distinct(nan).numel() == torch.unique(nan).numel()  # torch's path (numpy would merge the NaNs)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import torch
 
 from .native import host_path
-from .selection import kth_smallest, lower_median
+from .selection import distinct, kth_smallest, lower_median
 from .window_max import max_filter
 
 __all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "quantisation_step", "sample_percentiles",
@@ -307,9 +307,9 @@ def _grid_step(vals: torch.Tensor, default: float) -> float:
     if vals.numel() >= 4096:  # more distinct values in a prefix than the limit: more in all of them (noisy float
         # data, which repeats no value), without sorting all of them
         prefix = vals.reshape(-1)[: limit + 1 + limit // 8]
-        if torch.unique(prefix).numel() > limit:
+        if distinct(prefix).numel() > limit:
             return default
-    uniq = torch.unique(vals)
+    uniq = distinct(vals)
     if uniq.numel() < 2 or uniq.numel() > vals.numel() // 4:
         return default
     step = float((uniq[1:] - uniq[:-1]).min())
