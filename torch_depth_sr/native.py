@@ -51,7 +51,7 @@ _CONFIGURED = False
 _LOG = logging.getLogger("torch_depth_sr")
 # the kernel modules (under torch_depth_sr) whose numba functions warmup compiles and the notice watches
 KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "domain_kernel", "edge_snap_kernel",
-                  "fill_kernel", "nonlocal_kernel", "singular_kernel", "stream.box_kernel")
+                  "fill_kernel", "nonlocal_kernel", "singular_kernel", "stream.box_kernel", "stream.change_kernel")
 COMPILE_SECONDS = 13  # the kernels of a float32 forward: about 13 s of CPU (docs/measurements/numba-first-use/)
 _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per process; not during warmup
 

@@ -17,7 +17,8 @@ from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
 from .singular import detect_singular
-from .stream.change import local_spread
+from .stream.change import _nearest_distance as nearest_distance, local_spread
+from .stream.matching import dilate
 
 __all__ = ["warmup"]
 
@@ -67,9 +68,15 @@ def _warmup_steps(dtype: torch.dtype):
         with torch.no_grad():
             local_spread(x, trust, x, 3)
 
+    def stream_change():  # the change test's nearest distances (noise per pixel and per sample) and its dilation
+        with torch.no_grad():
+            for noise in (x + 1, torch.ones(1, 1, 1, 1, dtype=dtype)):
+                nearest_distance(x, trust, x.flip(-1), noise)
+            dilate(x > 0.5, 2)
+
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
             ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill), ("x0 filter", domain),
-            ("stream means", stream_means)]
+            ("stream means", stream_means), ("stream change test", stream_change)]
 
 
 def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),

@@ -97,6 +97,21 @@ def distances(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
     return torch.where(m, d0 / noise, zero), torch.where(m, d1 / noise, zero)
 
 
+def _nearest_distance(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
+                      noise: torch.Tensor) -> torch.Tensor:
+    """``distances(...)[1]``; on the CPU by the numba kernel (:mod:`~torch_depth_sr.stream.change_kernel`, the same
+    values) where every input has the frame's shape and dtype (``noise`` may be one value per sample)."""
+    n = noise.view(-1, 1, 1, 1) if noise.ndim == 1 else noise
+    if (host_path(y.device) and y.dtype in (torch.float32, torch.float64) and y.shape[1] == 1
+            and observed.shape == y.shape == previous.shape and n.shape[:2] == y.shape[:2]
+            and n.shape[-2:] in ((1, 1), y.shape[-2:]) and all(t.dtype == y.dtype for t in (observed, previous, n))
+            and not (torch.is_grad_enabled() and any(t.requires_grad for t in (y, previous, n)))):
+        kernel = cpu_kernel("stream.change_kernel", "nearest_distance_cpu")
+        if kernel is not None:
+            return kernel(y, observed, previous, n)
+    return distances(y, observed, previous, noise)[1]
+
+
 def depth_votes(d1: torch.Tensor, observed: torch.Tensor, window: int, threshold: float) -> torch.Tensor:
     """(B,1,H,W): the share of the window's votes that say "changed" (measured pixels with ``d1 > threshold``)
     among the measured pixels and three pseudo-votes of "unchanged"."""
@@ -155,7 +170,7 @@ def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
     """The change test of one frame (module docstring); ``y``, ``previous`` and ``noise`` in the units of one
     frame. Without ``settings.outlier_test`` no pixel is an *outlier*."""
     with torch.no_grad():
-        _, d1 = distances(y, observed, previous, noise)
+        d1 = _nearest_distance(y, observed, previous, noise)
         changed = depth_votes(d1, observed, settings.window, settings.depth_test) > 0.5
         seen = None
         if rgb is not None and previous_rgb is not None:
