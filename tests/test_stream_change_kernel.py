@@ -30,3 +30,30 @@ def test_dilate_kernel_equals_torch(monkeypatch, shape, radius):
     ref = matching.dilate(mask, radius)
     assert out.dtype == torch.bool and torch.equal(out, ref)
     assert bool(ref[mask].all())  # the set pixels stay set
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shape,window", [((1, 1, 1, 1), 3), ((1, 1, 4, 3), 7), ((2, 1, 37, 150), 7), ((1, 1, 90, 9), 5)])
+def test_vote_counts_kernel_equals_torch(monkeypatch, dtype, shape, window):
+    g = torch.Generator().manual_seed(window + sum(shape))
+    d1 = 6 * torch.rand(shape, generator=g, dtype=dtype)
+    observed = (torch.rand(shape, generator=g) > 0.3).to(dtype)
+    out = change.depth_votes(d1, observed, window, 2.7)  # not a float32: compared in the frame's dtype, as torch does
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = change.depth_votes(d1, observed, window, 2.7)
+    assert out.dtype == dtype and out.shape == ref.shape and torch.equal(out, ref)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shape,window", [((1, 3, 1, 1), 3), ((2, 3, 5, 4), 7), ((1, 3, 40, 61), 7)])
+def test_colour_change_equals_its_window_mean_form(monkeypatch, dtype, shape, window):
+    """color_change divides by the windows' in-image shares from counts: the weighted window mean of before."""
+    g = torch.Generator().manual_seed(window + sum(shape))
+    rgb, previous = torch.rand(shape, generator=g, dtype=dtype), torch.rand(shape, generator=g, dtype=dtype)
+    out = change.color_change(rgb, previous, window)
+    for numba in ("0", "1"):
+        monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", numba)
+        diff = rgb - previous
+        diff = diff - diff.flatten(2).median(-1).values[..., None, None]
+        num, den = change._window_mean(diff.abs().mean(1, keepdim=True), window)
+        assert torch.equal(out, num / den)

@@ -17,7 +17,7 @@ from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
 from .singular import detect_singular
-from .stream.change import _nearest_distance as nearest_distance, local_spread
+from .stream.change import _nearest_distance as nearest_distance, depth_votes, local_spread
 from .stream.matching import dilate
 
 __all__ = ["warmup"]
@@ -68,11 +68,12 @@ def _warmup_steps(dtype: torch.dtype):
         with torch.no_grad():
             local_spread(x, trust, x, 3)
 
-    def stream_change():  # the change test's nearest distances (noise per pixel and per sample) and its dilation
+    def stream_change():  # the change test's nearest distances (noise per pixel and per sample), votes, dilation
         with torch.no_grad():
             for noise in (x + 1, torch.ones(1, 1, 1, 1, dtype=dtype)):
                 nearest_distance(x, trust, x.flip(-1), noise)
             dilate(x > 0.5, 2)
+            depth_votes(x, trust, 3, 0.5)
 
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
             ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill), ("x0 filter", domain),

@@ -115,10 +115,15 @@ def _nearest_distance(y: torch.Tensor, observed: torch.Tensor, previous: torch.T
 def depth_votes(d1: torch.Tensor, observed: torch.Tensor, window: int, threshold: float) -> torch.Tensor:
     """(B,1,H,W): the share of the window's votes that say "changed" (measured pixels with ``d1 > threshold``)
     among the measured pixels and three pseudo-votes of "unchanged"."""
+    n = window * window
+    if (window % 2 == 1 and host_path(d1.device) and d1.dtype in (torch.float32, torch.float64)
+            and observed.dtype == d1.dtype and observed.shape == d1.shape and d1.shape[1] == 1):
+        kernel = cpu_kernel("stream.change_kernel", "votes_cpu")
+        if kernel is not None:  # the window counts, exact, and the votes with the roundings below
+            return kernel(d1, observed, threshold, window, _PRIOR)
     m = (observed > 0).to(d1.dtype)
     far = ((d1 > threshold) & (m > 0)).to(d1.dtype)
     num, den = _window_mean(far, window, m)
-    n = window * window
     return (num * n) / (den * n + _PRIOR)
 
 
@@ -152,8 +157,22 @@ def color_change(rgb: torch.Tensor, previous: torch.Tensor, window: int) -> torc
     """(B,1,H,W): the window mean of the absolute colour change, each channel's median change removed."""
     diff = rgb - previous
     diff = diff - lower_median(diff.flatten(2))[..., None, None]
-    num, den = _window_mean(diff.abs().mean(1, keepdim=True), window)
-    return num / den
+    change = diff.abs().mean(1, keepdim=True)
+    return _box_mean(change, window) / _inside_share(change, window)
+
+
+def _inside_share(like: torch.Tensor, window: int) -> torch.Tensor:
+    """(1,1,H,W): the share of each pixel's window that lies in the image, as ``_box_mean`` of ones gives it (the
+    count of in-image pixels over ``window²``, one rounding to ``like``'s dtype): from the rows' and columns' counts,
+    not a box filter of a plane of ones."""
+    h, w = like.shape[-2:]
+    p = window // 2
+
+    def inside(n):  # per position along an axis: the window's positions in [0, n)
+        i = torch.arange(n, device=like.device)
+        return (torch.clamp(i + p + 1, max=n) - torch.clamp(i - p, min=0)).to(torch.float64)
+
+    return (inside(h)[:, None] * inside(w)[None, :] / (window * window)).to(like.dtype).view(1, 1, h, w)
 
 
 class ChangeTest(NamedTuple):
