@@ -57,3 +57,18 @@ def test_colour_change_equals_its_window_mean_form(monkeypatch, dtype, shape, wi
         diff = diff - diff.flatten(2).median(-1).values[..., None, None]
         num, den = change._window_mean(diff.abs().mean(1, keepdim=True), window)
         assert torch.equal(out, num / den)
+
+
+def test_the_kernel_gate_takes_the_torch_path_for_gradients_other_dtypes_and_the_device_path(monkeypatch):
+    """native.host_kernel: the one gate of the kernels that keep the torch path's values."""
+    from torch_depth_sr import native
+
+    x = torch.rand(1, 1, 4, 5, dtype=torch.float64)
+    assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x) is not None
+    assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x.half()) is None
+    assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x, x.clone().requires_grad_()) is None
+    with torch.no_grad():
+        assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x.clone().requires_grad_()) is not None
+    assert native.host_kernel("stream.change_kernel", "dilate_cpu", x > 0.5, dtypes=(torch.bool,)) is not None
+    monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
+    assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x) is None

@@ -23,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from ._checks import check_4d, check_same_hw
-from .native import cpu_kernel, host_path
+from .native import host_kernel, host_path
 from .window_max import max_filter, min_filter
 
 __all__ = ["refit_to_measurements", "sided_median", "snap_to_sides"]
@@ -40,10 +40,7 @@ def _colour_weight(distance: torch.Tensor, sigma_color: float) -> torch.Tensor:
 def _kernel(name: str, x: torch.Tensor, *others: torch.Tensor):
     """The numba kernel ``name`` when ``x`` is a float CPU tensor and no gradient is needed (of ``x`` or ``others``),
     else None."""
-    tracked = torch.is_grad_enabled() and any(t.requires_grad for t in (x, *others))
-    if tracked or not host_path(x.device) or x.dtype not in (torch.float32, torch.float64):
-        return None
-    return cpu_kernel("edge_snap_kernel", name)
+    return host_kernel("edge_snap_kernel", name, x, *others)
 
 
 def _weighted_median(values: torch.Tensor, weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -28,7 +28,7 @@ import torch.nn.functional as F
 from ._checks import check_4d, check_floating, check_min_size, check_per_sample, check_same_hw, check_same_shape
 from .errors import DepthSRError, ShapeError
 from .fill import pull_push
-from .native import cpu_kernel, host_path, on_device
+from .native import host_kernel, host_path, on_device
 
 __all__ = ["domain_transform_filter", "joint_bilateral_filter", "joint_bilateral_upsample", "limited_slopes"]
 
@@ -125,8 +125,8 @@ def _box_bounds(coords: torch.Tensor, radius: torch.Tensor, radius_max: float,
     reach = min(int(math.floor(radius_max)), n - 1)  # no box reaches further: every step is >= 1
     pos = torch.arange(n, device=coords.device).view((n, 1) if dim == -2 else (n,))  # (H, 1) or (W,)
     if reach <= _COUNT_MAX:
-        kernel = cpu_kernel("domain_kernel", "bounds_cpu") if host_path(coords.device) else None
-        if kernel is not None:  # the same counts (box ends are integers: no gradient to keep)
+        kernel = host_kernel("domain_kernel", "bounds_cpu", coords.detach(), dtypes=None)  # integers: no gradient
+        if kernel is not None:  # the same counts
             return kernel(coords, radius, reach, dim)
         before = torch.zeros(coords.shape, dtype=torch.int16, device=coords.device)  # (B, 1, H, W)
         after = torch.zeros_like(before)
@@ -146,11 +146,9 @@ def _box_bounds(coords: torch.Tensor, radius: torch.Tensor, radius_max: float,
 def _box(values: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor, dim: int) -> torch.Tensor:
     """Mean of ``values`` (B,C,H,W) over the boxes ``lo <= j < hi`` along ``dim`` (cumulative sums); on the CPU
     without gradient by the numba kernel (:func:`~torch_depth_sr.domain_kernel.box_cpu`, the same values)."""
-    if values.dtype == torch.float64 and host_path(values.device) and not (
-            torch.is_grad_enabled() and values.requires_grad):
-        kernel = cpu_kernel("domain_kernel", "box_cpu")
-        if kernel is not None:
-            return kernel(values, lo, hi, dim)
+    kernel = host_kernel("domain_kernel", "box_cpu", values, dtypes=(torch.float64,))
+    if kernel is not None:
+        return kernel(values, lo, hi, dim)
     csum = F.pad(torch.cumsum(values, dim=dim), (1, 0) if dim == -1 else (0, 0, 1, 0))  # one more along dim
     shape = values.shape
     total = csum.gather(dim, hi.expand(shape)) - csum.gather(dim, lo.expand(shape))  # (B, C, H, W)

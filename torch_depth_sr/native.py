@@ -74,6 +74,22 @@ def host_path(device: torch.device) -> bool:
     return device.type == "cpu" and not device_path_forced()
 
 
+def host_kernel(module: str, name: str, *tensors: torch.Tensor,
+                dtypes: Optional[Sequence[torch.dtype]] = (torch.float32, torch.float64)) -> Optional[Callable]:
+    """The numba kernel ``torch_depth_sr.<module>.<name>`` (:func:`cpu_kernel`) for work on ``tensors``, when it may
+    run: the first tensor on the host path (:func:`host_path`), each of one of ``dtypes`` (None: any), and no
+    gradient asked of any of them. Else None, as without numba: the caller takes its torch path. The one gate of
+    the kernels that keep the torch path's values; pass ``t.detach()`` for an input whose result carries no
+    gradient anyway (integer box ends, block matches)."""
+    if not tensors or not host_path(tensors[0].device):
+        return None
+    if dtypes is not None and any(t.dtype not in dtypes for t in tensors):
+        return None
+    if torch.is_grad_enabled() and any(t.requires_grad for t in tensors):
+        return None
+    return cpu_kernel(module, name)
+
+
 def on_device(value, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
     """``value`` (a Python number, or a tensor) as a tensor of ``dtype`` on ``device``. A number is filled in on the
     device rather than copied from the host: a CUDA graph cannot capture a copy from pageable host memory, which

@@ -16,7 +16,7 @@ import torch
 from .._checks import check_same_hw
 from ..errors import DepthSRError, ShapeError
 from ._common import BlockMatches, Scalar, finish, prepare
-from ..native import cpu_kernel, host_path
+from ..native import host_kernel
 from .refine_torch import refine_torch
 from .torch_search import block_match_torch
 
@@ -70,7 +70,7 @@ def refine_matches(
                          expected=f"(B, >= {k}, H, W)")
     if isinstance(reach, bool) or not isinstance(reach, int) or reach < 0:
         raise DepthSRError(f"reach must be an int >= 0; got {reach!r}.")
-    refine_cpu = cpu_kernel("block_matching.refine_cpu", "refine_cpu") if host_path(depth.device) else None
+    refine_cpu = host_kernel("block_matching.refine_cpu", "refine_cpu", depth.detach(), dtypes=None)  # no gradient
     with torch.no_grad():
         trust = None if trust is None else trust.to(depth.dtype)
         rgb = None if rgb is None else rgb.to(depth.dtype)

@@ -34,7 +34,7 @@ import torch
 import torch.nn.functional as F
 
 from ..config import StreamConfig
-from ..native import cpu_kernel, host_path
+from ..native import host_kernel
 from ..selection import lower_median
 from .matching import dilate
 
@@ -49,10 +49,9 @@ def _box_mean(v: torch.Tensor, window: int) -> torch.Tensor:
     whatever the window, where ``avg_pool2d`` reads the whole window at every pixel, and exact to the rounding of
     the result. On the CPU without gradient by the numba kernel (:mod:`~torch_depth_sr.stream.box_kernel`, the same
     sums: the same means)."""
-    if window % 2 == 1 and host_path(v.device) and not (torch.is_grad_enabled() and v.requires_grad):
-        kernel = cpu_kernel("stream.box_kernel", "box_mean_cpu")
-        if kernel is not None:
-            return kernel(v, window)
+    kernel = host_kernel("stream.box_kernel", "box_mean_cpu", v) if window % 2 == 1 else None
+    if kernel is not None:
+        return kernel(v, window)
     p = window // 2
     d = F.pad(v.double(), (p + 1, p))
     c = d.cumsum(-1)
@@ -102,13 +101,11 @@ def _nearest_distance(y: torch.Tensor, observed: torch.Tensor, previous: torch.T
     """``distances(...)[1]``; on the CPU by the numba kernel (:mod:`~torch_depth_sr.stream.change_kernel`, the same
     values) where every input has the frame's shape and dtype (``noise`` may be one value per sample)."""
     n = noise.view(-1, 1, 1, 1) if noise.ndim == 1 else noise
-    if (host_path(y.device) and y.dtype in (torch.float32, torch.float64) and y.shape[1] == 1
-            and observed.shape == y.shape == previous.shape and n.shape[:2] == y.shape[:2]
-            and n.shape[-2:] in ((1, 1), y.shape[-2:]) and all(t.dtype == y.dtype for t in (observed, previous, n))
-            and not (torch.is_grad_enabled() and any(t.requires_grad for t in (y, previous, n)))):
-        kernel = cpu_kernel("stream.change_kernel", "nearest_distance_cpu")
-        if kernel is not None:
-            return kernel(y, observed, previous, n)
+    fits = (y.shape[1] == 1 and observed.shape == y.shape == previous.shape and n.shape[:2] == y.shape[:2]
+            and n.shape[-2:] in ((1, 1), y.shape[-2:]) and all(t.dtype == y.dtype for t in (observed, previous, n)))
+    kernel = host_kernel("stream.change_kernel", "nearest_distance_cpu", y, observed, previous, n) if fits else None
+    if kernel is not None:
+        return kernel(y, observed, previous, n)
     return distances(y, observed, previous, noise)[1]
 
 
@@ -116,11 +113,10 @@ def depth_votes(d1: torch.Tensor, observed: torch.Tensor, window: int, threshold
     """(B,1,H,W): the share of the window's votes that say "changed" (measured pixels with ``d1 > threshold``)
     among the measured pixels and three pseudo-votes of "unchanged"."""
     n = window * window
-    if (window % 2 == 1 and host_path(d1.device) and d1.dtype in (torch.float32, torch.float64)
-            and observed.dtype == d1.dtype and observed.shape == d1.shape and d1.shape[1] == 1):
-        kernel = cpu_kernel("stream.change_kernel", "votes_cpu")
-        if kernel is not None:  # the window counts, exact, and the votes with the roundings below
-            return kernel(d1, observed, threshold, window, _PRIOR)
+    fits = window % 2 == 1 and observed.dtype == d1.dtype and observed.shape == d1.shape and d1.shape[1] == 1
+    kernel = host_kernel("stream.change_kernel", "votes_cpu", d1, observed) if fits else None
+    if kernel is not None:  # the window counts, exact, and the votes with the roundings below
+        return kernel(d1, observed, threshold, window, _PRIOR)
     m = (observed > 0).to(d1.dtype)
     far = ((d1 > threshold) & (m > 0)).to(d1.dtype)
     num, den = _window_mean(far, window, m)

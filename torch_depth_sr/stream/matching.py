@@ -17,7 +17,7 @@ import torch
 from ..block_matching import BlockMatches
 from ..block_matching._common import candidates_everywhere, finish
 from ..config import BlockMatchingConfig
-from ..native import cpu_kernel, host_path
+from ..native import host_kernel
 from ..observation import Observation
 from ..stages import BlockMatcher
 from ..window_max import max_filter
@@ -154,8 +154,7 @@ def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:
     """``mask`` (B,1,H,W) bool grown by a square of ``radius`` px (on the CPU by a numba kernel: the same mask)."""
     if radius <= 0:
         return mask
-    if mask.dtype == torch.bool and host_path(mask.device):
-        kernel = cpu_kernel("stream.change_kernel", "dilate_cpu")
-        if kernel is not None:
-            return kernel(mask, radius)
+    kernel = host_kernel("stream.change_kernel", "dilate_cpu", mask, dtypes=(torch.bool,))
+    if kernel is not None:
+        return kernel(mask, radius)
     return max_filter(mask.to(torch.float32), 2 * radius + 1) > 0
