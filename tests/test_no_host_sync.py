@@ -305,3 +305,22 @@ def test_the_gpu_report_table():
     assert lines[4].startswith("| stream-fast | 480x640 | 1 | 6 | 0.5 |")
     assert lines[5].endswith("| out of memory: CUDA |")
     assert format_table(rows[:1], header=False).count("\n") == 0
+
+
+def test_the_gpu_reports_stream_step_feeds_new_frames_of_one_scene():
+    """gpu_report.stream_step: its first call is the stream's cold frame (the per-frame model's output on that frame),
+    later calls new noise on the same scene; drawing the noise on the CPU gives the same frames on the CPU."""
+    from torch_depth_sr.evaluation import gpu_report, speed
+
+    depth, rgb, gt = speed.make_inputs(24, 32, 1)
+    model = DepthRestorer.from_preset("fast").eval()
+    with torch.no_grad():
+        step = gpu_report.stream_step(model, depth, rgb, gt)
+        again = gpu_report.stream_step(model, depth, rgb, gt, noise_device="cpu")
+        first, second = step(), step()
+        assert torch.equal(first, again()) and torch.equal(second, again())
+        frame = torch.where(depth <= 0, torch.zeros_like(depth),
+                            (gt + 5.0 * torch.randn(depth.shape, generator=torch.Generator().manual_seed(1))
+                             ).clamp_min(1.0))
+        assert torch.equal(first, model(frame, rgb))
+    assert not torch.equal(first, second)
