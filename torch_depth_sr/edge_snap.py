@@ -37,12 +37,6 @@ def _colour_weight(distance: torch.Tensor, sigma_color: float) -> torch.Tensor:
     return torch.exp(-distance / sigma_color)
 
 
-def _kernel(name: str, x: torch.Tensor, *others: torch.Tensor):
-    """The numba kernel ``name`` when ``x`` is a float CPU tensor and no gradient is needed (of ``x`` or ``others``),
-    else None."""
-    return host_kernel("edge_snap_kernel", name, x, *others)
-
-
 def _weighted_median(values: torch.Tensor, weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Weighted median over the last dimension (the first value whose cumulative weight reaches half the total)
     and the total weight, both without that dimension."""
@@ -87,7 +81,7 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
         d = torch.arange(-r, r + 1, dtype=torch.float64, device=x.device)  # on the device: a CUDA graph captures it
         squared = (d[:, None] * d[:, None] + d[None, :] * d[None, :]).flatten()  # the offsets' order, row-major
         spatial = (-squared / (2.0 * sigma_space ** 2)).to(x.dtype).exp().view(1, -1, 1, 1)
-    kernel = _kernel("sided_median_cpu", x, guide)
+    kernel = host_kernel("edge_snap_kernel", "sided_median_cpu", x, guide)
     if kernel is not None:
         return kernel(x, guide, r, sigma_color, spatial)
     return _sided_median_torch(x, guide, r, sigma_color, spatial)
@@ -216,7 +210,7 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
     if cpu and where.shape[0] == 0:
         return x
     pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3] if cpu else None
-    kernel = _kernel("refit_cpu", x, y, guide)
+    kernel = host_kernel("edge_snap_kernel", "refit_cpu", x, y, guide)
     if kernel is not None:
         return kernel(x, y, observed, guide, pixels, r, band, sigma_color)
     return _refit_torch(x, y, observed, guide, near_edge, pixels, r, band, sigma_color)

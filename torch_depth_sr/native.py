@@ -1,5 +1,6 @@
 """The one loader of the compiled CPU kernels (numba): block matching, the singular test, the nonlocal terms, the
-edge steps' medians, the hole fill's passes, the boxes of x⁰'s domain-transform filter, a stream's window means.
+edge steps' medians, the hole fill's passes, the boxes of x⁰'s domain-transform filter, a stream's window means
+and change test.
 
 Each kernel module imports numba at its top; :func:`cpu_kernel` imports it on first use and returns the
 requested function, or None, so that the caller runs its torch path (same results, slower on a CPU). Without

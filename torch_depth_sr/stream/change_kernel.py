@@ -6,11 +6,13 @@
 In torch each is a chain of whole-frame operations, each with a temporary: ``d1`` is 8 differences, 8 absolute values
 and 8 minima over a padded copy, then a division and a selection; a dilation is a float copy of the mask and a
 running maximum of ``2·radius`` shifted planes per axis. At 1376×1088 the two took about 0.1 s of a 2.6 s stream
-step, the votes' 0/1 planes and their window means about 0.08 s more. Here each is one pass (the dilation and the
-counts two: rows, then bands of columns). The same arithmetic: a difference, its absolute value, the smallest, one
-division in the frame's dtype; a dilation is exact, and so is a window's count of 0/1 votes (the torch path's float64
-sums of 0/1 values are those integers), from which the votes are formed with the torch path's roundings. So the results are the
-torch path's bit for bit (tested). Rows and bands split across threads (:func:`~torch_depth_sr.native.run_range`).
+step, the votes' 0/1 planes and their window means about 0.08 s more. Here ``d1`` is one pass. The dilation and the
+votes share one mechanism, the window counts of 0/1 planes (:func:`_window_counts`: a row pass, then bands of
+columns): a dilation is a count above 0, and the votes are formed from the counts of the far and the measured pixels
+with the torch path's roundings (the torch path's float64 window sums of 0/1 values are those integers). The same
+arithmetic as torch throughout (a difference, its absolute value, the smallest, one division in the frame's dtype),
+so the results are the torch path's bit for bit (tested). Rows and bands split across threads
+(:func:`~torch_depth_sr.native.run_range`).
 Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
@@ -64,27 +66,27 @@ def nearest_distance_cpu(y: torch.Tensor, observed: torch.Tensor, previous: torc
 
 
 @njit(cache=True, nogil=True)
-def _dilate_rows(t0, t1, mask, radius, out):
-    """Rows ``[t0, t1)`` of the ``P·H`` rows of ``mask (P,H,W)`` uint8: ``out`` = 1 where a set pixel lies within
+def _count_rows(t0, t1, planes, radius, out):
+    """Rows ``[t0, t1)`` of the ``P·H`` rows of ``planes (P,H,W)`` uint8: ``out`` (int32) = the set pixels within
     ``radius`` columns (the row's window clipped to the image)."""
-    h, w = mask.shape[1], mask.shape[2]
-    count = np.empty(w + 1, dtype=np.int64)
+    h, w = planes.shape[1], planes.shape[2]
+    count = np.empty(w + 1, dtype=np.int32)
     for t in range(t0, t1):
         p = t // h
         i = t - p * h
         count[0] = 0
         for j in range(w):
-            count[j + 1] = count[j] + (1 if mask[p, i, j] else 0)
+            count[j + 1] = count[j] + (1 if planes[p, i, j] else 0)
         for j in range(w):
-            out[p, i, j] = 1 if count[min(w, j + radius + 1)] - count[max(0, j - radius)] > 0 else 0
+            out[p, i, j] = count[min(w, j + radius + 1)] - count[max(0, j - radius)]
 
 
 @njit(cache=True, nogil=True)
-def _dilate_columns(t0, t1, rows, radius, bands, out):
-    """Tasks ``[t0, t1)`` of ``P·bands`` (plane, band of ``_BAND`` columns): the column pass of :func:`_dilate_rows`
-    on its output."""
+def _count_columns(t0, t1, rows, radius, bands, out):
+    """Tasks ``[t0, t1)`` of ``P·bands`` (plane, band of ``_BAND`` columns): the column pass of :func:`_count_rows`
+    on its row counts: the window counts."""
     h, w = rows.shape[1], rows.shape[2]
-    count = np.empty((h + 1, _BAND), dtype=np.int64)
+    count = np.empty((h + 1, _BAND), dtype=np.int32)
     for t in range(t0, t1):
         p = t // bands
         x0 = (t - p * bands) * _BAND
@@ -98,72 +100,43 @@ def _dilate_columns(t0, t1, rows, radius, bands, out):
             hi = min(h, y + radius + 1)
             lo = max(0, y - radius)
             for x in range(x0, x1):
-                out[p, y, x] = count[hi, x - x0] - count[lo, x - x0] > 0
+                out[p, y, x] = count[hi, x - x0] - count[lo, x - x0]
+
+
+def _window_counts(planes: torch.Tensor, radius: int) -> np.ndarray:
+    """(P,H,W) int32: the set pixels of each of the bool ``planes`` (..., H, W) within ``radius`` px of each pixel
+    (a square clipped to the image): what a box filter with zero padding sums over a 0/1 plane."""
+    h, w = planes.shape[-2:]
+    a = np.ascontiguousarray(planes.reshape(-1, h, w).numpy()).view(np.uint8)
+    rows = np.empty(a.shape, dtype=np.int32)
+    run_range(_count_rows, a.shape[0] * h, a, int(radius), rows, min_share=_MIN_ROWS)
+    out = np.empty(a.shape, dtype=np.int32)
+    bands = -(-w // _BAND)
+    run_range(_count_columns, a.shape[0] * bands, rows, int(radius), bands, out)
+    return out
 
 
 def dilate_cpu(mask: torch.Tensor, radius: int) -> torch.Tensor:
     """``dilate(mask, radius)`` of a (B,C,H,W) bool mask on the CPU: grown by a square of ``radius`` px."""
-    b, ch, h, w = mask.shape
-    a = np.ascontiguousarray(mask.reshape(b * ch, h, w).numpy()).view(np.uint8)
-    rows = np.empty(a.shape, dtype=np.uint8)
-    run_range(_dilate_rows, b * ch * h, a, int(radius), rows, min_share=_MIN_ROWS)
-    out = np.empty(a.shape, dtype=np.bool_)
-    bands = -(-w // _BAND)
-    run_range(_dilate_columns, b * ch * bands, rows, int(radius), bands, out)
-    return torch.from_numpy(out).view(b, ch, h, w)
-
-
-@njit(cache=True, nogil=True)
-def _vote_rows(t0, t1, d1, observed, threshold, radius, out):
-    """Rows ``[t0, t1)`` of the ``B·H`` rows: per pixel the counts, over the row's window of ``radius`` columns each
-    side (clipped to the image), of the measured pixels (``out[..., 1]``) and of those with ``d1 > threshold``
-    (``out[..., 0]``)."""
-    h, w = d1.shape[1], d1.shape[2]
-    far = np.empty(w + 1, dtype=np.int32)
-    seen = np.empty(w + 1, dtype=np.int32)
-    for t in range(t0, t1):
-        b = t // h
-        i = t - b * h
-        far[0] = 0
-        seen[0] = 0
-        for j in range(w):
-            m = observed[b, i, j] > 0
-            seen[j + 1] = seen[j] + (1 if m else 0)
-            far[j + 1] = far[j] + (1 if m and d1[b, i, j] > threshold else 0)
-        for j in range(w):
-            hi = min(w, j + radius + 1)
-            lo = max(0, j - radius)
-            out[b, i, j, 0] = far[hi] - far[lo]
-            out[b, i, j, 1] = seen[hi] - seen[lo]
+    return torch.from_numpy(_window_counts(mask, radius) > 0).view(mask.shape)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _vote_columns(t0, t1, rows, radius, bands, consts, out):
-    """Tasks ``[t0, t1)`` of ``B·bands``: the column pass of :func:`_vote_rows` on its row counts, then the votes as
-    ``depth_votes`` forms them in the frame's dtype: the counts' window means (float64, rounded once to the dtype),
-    ``(num · n) / (den · n + prior)`` with ``consts = [n, prior, area]`` in the dtype."""
-    h, w = rows.shape[1], rows.shape[2]
-    count = np.empty((h + 1, _BAND, 2), dtype=np.int32)
+def _votes(t0, t1, counts, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·H`` rows: the votes as ``depth_votes`` forms them in the frame's dtype from the
+    window counts ``counts (2B, H, W)`` (the far votes of sample b in plane b, its measured pixels in plane B + b):
+    their window means (float64, rounded once to the dtype), ``(num · n) / (den · n + prior)`` with ``consts = [n,
+    prior, area]`` in the dtype."""
+    half, h, w = counts.shape[0] // 2, counts.shape[1], counts.shape[2]
     mean = np.empty(2, dtype=consts.dtype)  # a store rounds the float64 mean to the dtype, as .to(dtype) does
     area = np.float64(consts[2])
     for t in range(t0, t1):
-        b = t // bands
-        x0 = (t - b * bands) * _BAND
-        x1 = min(w, x0 + _BAND)
-        for x in range(x0, x1):
-            count[0, x - x0, 0] = 0
-            count[0, x - x0, 1] = 0
-        for y in range(h):
-            for x in range(x0, x1):
-                count[y + 1, x - x0, 0] = count[y, x - x0, 0] + rows[b, y, x, 0]
-                count[y + 1, x - x0, 1] = count[y, x - x0, 1] + rows[b, y, x, 1]
-        for y in range(h):
-            hi = min(h, y + radius + 1)
-            lo = max(0, y - radius)
-            for x in range(x0, x1):
-                mean[0] = np.float64(count[hi, x - x0, 0] - count[lo, x - x0, 0]) / area
-                mean[1] = np.float64(count[hi, x - x0, 1] - count[lo, x - x0, 1]) / area
-                out[b, 0, y, x] = (mean[0] * consts[0]) / (mean[1] * consts[0] + consts[1])
+        b = t // h
+        i = t - b * h
+        for j in range(w):
+            mean[0] = np.float64(counts[b, i, j]) / area
+            mean[1] = np.float64(counts[half + b, i, j]) / area
+            out[b, i, j] = (mean[0] * consts[0]) / (mean[1] * consts[0] + consts[1])
 
 
 def votes_cpu(d1: torch.Tensor, observed: torch.Tensor, threshold: float, window: int, prior: float) -> torch.Tensor:
@@ -171,13 +144,10 @@ def votes_cpu(d1: torch.Tensor, observed: torch.Tensor, threshold: float, window
     over the ``window × window`` window clipped to the image, the measured pixels with ``d1 > threshold`` against
     the measured pixels and ``prior`` pseudo-votes."""
     b, _, h, w = d1.shape
-    a = np.ascontiguousarray(d1.detach().reshape(b, h, w).numpy())
-    m = np.ascontiguousarray(observed.detach().reshape(b, h, w).numpy())
-    rows = np.empty((b, h, w, 2), dtype=np.int32)
-    radius = window // 2
-    run_range(_vote_rows, b * h, a, m, a.dtype.type(threshold), radius, rows, min_share=_MIN_ROWS)
-    out = np.empty((b, 1, h, w), dtype=a.dtype)
-    bands = -(-w // _BAND)
-    consts = np.array([window * window, prior, window * window], dtype=a.dtype)
-    run_range(_vote_columns, b * bands, rows, radius, bands, consts, out)
-    return torch.from_numpy(out)
+    measured = observed > 0
+    counts = _window_counts(torch.cat([(d1 > threshold) & measured, measured]), window // 2)  # (2B, H, W)
+    dtype = d1.detach().numpy().dtype
+    out = np.empty((b, h, w), dtype=dtype)
+    consts = np.array([window * window, prior, window * window], dtype=dtype)
+    run_range(_votes, b * h, counts, consts, out, min_share=_MIN_ROWS)
+    return torch.from_numpy(out).view(b, 1, h, w)
