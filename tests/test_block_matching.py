@@ -387,28 +387,30 @@ def test_model_refine_rematching_stays_close_to_exact():
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("with_trust", [False, True])
-def test_the_torch_re_matching_ranks_the_cpu_kernels_candidates(dtype, with_trust):
+@pytest.mark.parametrize("block,window,k", [(5, 11, 8), (3, 7, 10)])
+def test_the_torch_re_matching_ranks_the_cpu_kernels_candidates(dtype, with_trust, block, window, k):
     """refine_torch (the device path) against refine_cpu: the previous matches alone are re-scored in the kernel's
     order (float32: the same distances bit for bit); with the step-2 lattice the lattice's distances are box sums
-    (the last bit may differ), so almost every match is the same."""
+    (the last bit may differ), so almost every match is the same. The default tier's 7×7 window at stride 2 has 9
+    lattice offsets, fewer than its k = 10."""
     from torch_depth_sr.block_matching.refine_cpu import refine_cpu
     from torch_depth_sr.block_matching.refine_torch import refine_torch
 
     g = torch.Generator().manual_seed(4)
     x, rgb = torch.rand(2, 1, 30, 38, generator=g, dtype=dtype), torch.rand(2, 3, 30, 38, generator=g, dtype=dtype)
     trust = (torch.rand(2, 1, 30, 38, generator=g) > 0.2).to(dtype) if with_trust else None
-    first = block_match(x, rgb, trust, block_size=5, search_window=11, k=8)
+    first = block_match(x, rgb, trust, block_size=block, search_window=window, k=k)
     moved = x + 0.05 * torch.randn(x.shape, generator=g, dtype=dtype)
     rho = torch.tensor([1.0, 0.5], dtype=dtype)
     for lattice in (0, 2):
-        d_cpu, i_cpu = refine_cpu(moved, rgb, trust, first.index, 5, 11, 8, rho, False, 0, lattice)
-        d_torch, i_torch = refine_torch(moved, rgb, trust, first.index, 5, 11, 8, rho, False, lattice)
+        d_cpu, i_cpu = refine_cpu(moved, rgb, trust, first.index, block, window, k, rho, False, 0, lattice)
+        d_torch, i_torch = refine_torch(moved, rgb, trust, first.index, block, window, k, rho, False, lattice)
         assert float((i_cpu == i_torch).double().mean()) >= 0.999, lattice
         assert torch.allclose(d_cpu, d_torch, rtol=1e-6, atol=1e-6)
         if lattice == 0 and dtype == torch.float32:
             assert torch.equal(d_cpu, d_torch)
         if lattice == 2:  # never worse than the previous matches re-scored (the lattice only adds candidates)
-            assert bool((d_torch <= refine_torch(moved, rgb, trust, first.index, 5, 11, 8, rho, False, 0)[0]
+            assert bool((d_torch <= refine_torch(moved, rgb, trust, first.index, block, window, k, rho, False, 0)[0]
                          + 1e-6).all())
 
 

@@ -184,6 +184,8 @@ def top_keys(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[t
             keys[..., 0, centre] = oid_grid[0, centre]
         else:  # a fill, not an item set from a host number (that copies it to the device; a graph cannot capture it)
             keys[..., 0, centre].fill_(_INT64_MAX)
-        top = smallest_keys(keys.view(bsz, rows * w, n_off), k)  # (B, rows·W, k)
+        top = smallest_keys(keys.view(bsz, rows * w, n_off), min(k, n_off))  # (B, rows·W, k) ascending
+        if n_off < k:  # a lattice with fewer offsets than k (a 7×7 window at stride 2 has 9): the rest no candidate
+            top = torch.cat([top, top[..., :1].expand(-1, -1, k - n_off).clone().fill_(_INT64_MAX)], dim=2)
         top_all[:, :, h0:h1] = top.transpose(1, 2).reshape(bsz, k, rows, w)
     return top_all
