@@ -5,7 +5,7 @@ and optionally their time at 640x480 against kornia's 9x9 JBF in the same run.
     python docs/measurements/issue27-tiers/fit.py --label L --spec 'config:{"num_layers": 3}' --time
 
 ``--spec``: ``preset:NAME``, ``pretrained:NAME``, ``folder:PATH`` (a saved model) or ``config:JSON`` (overrides of
-``--base``, default ``preset:default``, as ``apply_overrides`` takes them). Each result is appended as one JSON line to
+``--base``, default ``preset:full``, the frozen defaults, as ``apply_overrides`` takes them). Each result is appended as one JSON line to
 ``--out`` (default ``out/issue27/fit.jsonl``). The held-out 2005/2003/2001 scenes are never loaded here.
 """
 from __future__ import annotations
@@ -24,7 +24,7 @@ SCENES_2006 = ("Baby1", "Baby2", "Baby3", "Cloth1", "Cloth2", "Cloth3", "Cloth4"
 
 def build(spec: str, base: str = "preset:default"):
     from torch_depth_sr import DepthRestorer
-    from torch_depth_sr.config import apply_overrides
+    from torch_depth_sr.config import TRAINED_PRESETS, apply_overrides
 
     kind, _, rest = spec.partition(":")
     if kind == "preset":
@@ -37,7 +37,8 @@ def build(spec: str, base: str = "preset:default"):
         b = build(base)
         cfg = apply_overrides(b.config, json.loads(rest))
         m = DepthRestorer(cfg)
-        if base.split(":")[0] != "preset":  # trained parameters carried over (same shapes)
+        base_kind, _, base_name = base.partition(":")
+        if base_kind != "preset" or base_name in TRAINED_PRESETS:  # trained parameters carried over (same shapes)
             m.load_state_dict(b.state_dict())
         return m
     raise SystemExit(f"unknown spec {spec!r}")
@@ -97,7 +98,7 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--label", required=True)
     p.add_argument("--spec", required=True)
-    p.add_argument("--base", default="preset:default")
+    p.add_argument("--base", default="preset:full")
     p.add_argument("--tracks", nargs="*", default=["paper", "sensor"])
     p.add_argument("--time", action="store_true")
     p.add_argument("--repeats", type=int, default=3)

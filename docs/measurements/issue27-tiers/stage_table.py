@@ -49,11 +49,13 @@ def load(spec: str) -> DepthRestorer:
         return DepthRestorer.from_preset(name)
     if kind == "pretrained":
         return DepthRestorer.from_pretrained(name)
+    if kind == "folder":  # a saved model (DepthRestorer.save)
+        return DepthRestorer.load(name)
     if kind == "config":  # config:<json of overrides of the defaults>
         from torch_depth_sr.config import RestorerConfig, apply_overrides
 
         return DepthRestorer(apply_overrides(RestorerConfig(), json.loads(name)))
-    raise SystemExit(f"unknown model spec {spec!r} (preset:NAME, pretrained:NAME, config:JSON)")
+    raise SystemExit(f"unknown model spec {spec!r} (preset:NAME, pretrained:NAME, folder:PATH, config:JSON)")
 
 
 class InitTimer:
