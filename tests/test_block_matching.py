@@ -422,7 +422,7 @@ def test_the_default_tiers_device_path_re_matches_as_the_cpu_does(monkeypatch):
     from torch_depth_sr.evaluation.speed import make_inputs
 
     y, rgb, gt = make_inputs(64, 80, 1, seed=3)
-    model = DepthRestorer.from_preset("default").eval()
+    model = DepthRestorer.from_preset("full").eval()
     with torch.no_grad():
         host = model(y, rgb)
         monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")

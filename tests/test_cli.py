@@ -55,7 +55,7 @@ def test_demo_fails_when_the_model_does_not_beat_its_ablation(tmp_path, monkeypa
     class Broken:
         @staticmethod
         def from_preset(name, **kw):
-            return (lambda y, rgb: y.clone()) if name == "default" else real.from_preset(name, **kw)
+            return (lambda y, rgb: y.clone()) if name == "full" else real.from_preset(name, **kw)
 
     monkeypatch.setattr(model_module, "DepthRestorer", Broken)  # cmd_demo imports it when it runs
     assert main(["demo", "--out", str(tmp_path), "--height", "64", "--width", "80"]) == 1

@@ -85,7 +85,7 @@ def test_flat_fields_on_other_bases_as_version1(base):
 
 def test_version1_view_round_trips_the_presets():
     """Everything but the stream group, which version 1 did not have (the fast tier carries one)."""
-    for name in ("default", "fast", "paper", "tv", "tv+nl"):
+    for name in ("full", "default", "fast", "paper", "tv", "tv+nl"):
         c = preset_config(name)
         assert from_version1(to_version1(c)) == c.replace(stream=None), name
     assert preset_config("fast").stream is not None  # the case above covers one

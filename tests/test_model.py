@@ -105,7 +105,7 @@ class TestDepthRestorer:
         d, c = scene["depth"], scene["rgb"]
         tv = DepthRestorer.from_preset("tv", **SMALL)(d, c)
         tvnl = DepthRestorer.from_preset("tv+nl", **SMALL)(d, c)
-        full = DepthRestorer.from_preset("default", **SMALL)(d, c)
+        full = DepthRestorer.from_preset("full", **SMALL)(d, c)
         assert not torch.equal(tv, tvnl) and not torch.equal(tvnl, full)
 
     def test_details(self, scene):

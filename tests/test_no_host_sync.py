@@ -196,7 +196,7 @@ def test_every_tier_gives_the_same_output_on_both_paths(tier, monkeypatch):
 
 def test_the_device_path_is_close_to_the_numba_kernels(monkeypatch):
     """Against the default CPU path (numba): block matching's float near-ties may pick other blocks."""
-    model = DepthRestorer.from_preset("default")
+    model = DepthRestorer.from_preset("full")
     depth, rgb = _sensor_like()
     with torch.no_grad():
         cpu = model(depth, rgb)

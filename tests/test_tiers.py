@@ -24,7 +24,11 @@ def sample():
 def test_every_tier_is_a_name_of_from_preset():
     assert TIERS == ("fast", "default", "best")
     assert set(TIERS) <= set(PRESETS) | set(TRAINED_PRESETS)
-    assert DepthRestorer.from_preset("default").config == DepthRestorer().config
+    assert DepthRestorer.from_preset("full").config == DepthRestorer().config  # the frozen defaults
+    for tier, shipped in (("default", "denoise-default"), ("best", "denoise-refined")):
+        model, saved = DepthRestorer.from_preset(tier), DepthRestorer.from_pretrained(shipped)
+        assert model.config == saved.config
+        assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), saved.state_dict().values()))
     best, refined = DepthRestorer.from_preset("best"), DepthRestorer.from_pretrained("denoise-refined")
     assert best.config == refined.config
     assert all(torch.equal(a, b) for a, b in zip(best.state_dict().values(), refined.state_dict().values()))
@@ -57,7 +61,7 @@ def test_every_tier_takes_float64(name, sample):
 def test_the_tiers_are_bench_methods(sample):
     from torch_depth_sr.evaluation.methods import TIER_METHODS, run_method
 
-    assert TIER_METHODS == {"fast": "fast", "default": "full", "best": "best"}
+    assert TIER_METHODS == {"fast": "fast", "default": "default", "best": "best"}
     s = {"depth": sample["depth"], "rgb": sample["rgb"]}
     with torch.no_grad():
         want = DepthRestorer.from_preset("fast")(sample["depth"][None], sample["rgb"][None])
@@ -85,7 +89,7 @@ def test_restore_depth_transform_takes_the_tier_by_name(sample):
     with torch.no_grad():
         want = restore_depth(sample["depth"], sample["rgb"], model=DepthRestorer.from_preset("fast"))
     assert torch.equal(out, want)
-    assert RestoreDepth(preset="default", num_layers=2).restorer.config.num_layers == 2
+    assert RestoreDepth(preset="full", num_layers=2).restorer.config.num_layers == 2
     with pytest.raises(DepthSRError, match="preset"):
         RestoreDepth(preset="fast", pretrained="denoise")
 
@@ -192,3 +196,21 @@ def test_cg_without_the_unused_last_direction_is_the_textbook_loop():
         res = conjugate_gradient(apply_a, b, x0=x0, precond=precond, tol=1e-30, max_iter=max_iter, early_exit=False)
         x, its, rel = reference(apply_a, b, x0, precond, 1e-30, max_iter)
         assert torch.equal(res.x, x) and torch.equal(res.iterations, its) and torch.equal(res.residual, rel)
+
+
+def test_restore_depth_runs_the_default_tier_to_denoise_and_the_frozen_defaults_to_upsample():
+    """Without a model or settings, restore_depth denoises with the trained default tier and upsamples with the frozen
+    defaults (the preset "full"), which the tier was not trained for."""
+    from torch_depth_sr import restore_depth
+    from torch_depth_sr.datasets.synthetic import make_scene
+
+    s = make_scene(32, 40, seed=2)
+    depth = (s["gt"] + torch.randn(s["gt"].shape, generator=torch.Generator().manual_seed(0))).clamp_min(1)
+    with torch.no_grad():
+        out = restore_depth(depth, s["rgb"])
+        assert torch.equal(out, restore_depth(depth, s["rgb"], model=DepthRestorer.from_preset("default")))
+        assert not torch.equal(out, restore_depth(depth, s["rgb"], model=DepthRestorer.from_preset("full")))
+        low = depth[..., ::2, ::2].contiguous()
+        up = restore_depth(low, s["rgb"])
+        assert up.shape[-2:] == depth.shape[-2:]
+        assert torch.equal(up, restore_depth(low, s["rgb"], model=DepthRestorer()))

@@ -32,7 +32,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     preds["input"] = fill_holes(y, (y > 0).float())
     secs = {"input": time.perf_counter() - t0}
-    for name, preset in (("tv", "tv"), ("full", "default")):
+    for name, preset in (("tv", "tv"), ("full", "full")):
         model = DepthRestorer.from_preset(preset)
         t0 = time.perf_counter()
         preds[name] = model(y, rgb)

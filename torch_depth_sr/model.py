@@ -125,11 +125,11 @@ class DepthRestorer(nn.Module):
 
     @classmethod
     def from_preset(cls, name: str, trainable: bool = False, **overrides) -> "DepthRestorer":
-        """The named configuration ``name`` (:data:`~torch_depth_sr.config.PRESETS`: ``'default'``, ``'paper'``,
-        ``'tv'``, ``'tv+nl'``), then ``overrides`` (:meth:`RestorerConfig.replace`). The speed tiers ``'fast'``
-        and ``'best'`` (:data:`~torch_depth_sr.config.TRAINED_PRESETS`) carry trained parameters: they load the
-        shipped model they name (:meth:`from_pretrained`, ``overrides`` as :meth:`load` takes them). Other trained
-        models come from :meth:`from_pretrained`.
+        """The named configuration ``name`` (:data:`~torch_depth_sr.config.PRESETS`: ``'full'``, the configuration's
+        defaults, frozen; ``'paper'``, ``'tv'``, ``'tv+nl'``), then ``overrides`` (:meth:`RestorerConfig.replace`).
+        The speed tiers ``'fast'``, ``'default'`` and ``'best'`` (:data:`~torch_depth_sr.config.TRAINED_PRESETS`)
+        carry trained parameters: they load the shipped model they name (:meth:`from_pretrained`, ``overrides`` as
+        :meth:`load` takes them). Other trained models come from :meth:`from_pretrained`.
 
         Examples:
             >>> DepthRestorer.from_preset("fast").config.block_matching.match_layers
@@ -448,8 +448,11 @@ def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optio
             For guided upsampling it is ``s`` times larger than ``depth``.
         mask: optional validity mask shaped like ``depth`` (nonzero = measured), combined with the
             0/NaN rule.
-        model: the :class:`DepthRestorer` to run (e.g. ``DepthRestorer.from_pretrained("denoise")``); by default
-            one is built from ``config`` and ``**overrides`` (which change single fields).
+        model: the :class:`DepthRestorer` to run (e.g. ``DepthRestorer.from_preset("fast")``). By default, the
+            ``default`` speed tier (``DepthRestorer.from_preset("default")``, a trained denoiser) when ``depth`` and
+            ``rgb`` are the same size, and the frozen configuration's defaults (``DepthRestorer()``, preset
+            ``"full"``) for guided upsampling; with ``config`` or ``**overrides`` (which change single fields),
+            ``DepthRestorer(config, **overrides)``.
         config: a :class:`RestorerConfig`; only without ``model``.
         noise_sigma: the noise std in depth units; estimated from the input when omitted.
         scale_factor: guided upsampling factor; inferred from the sizes when omitted.
@@ -470,14 +473,16 @@ def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optio
         >>> out.dtype, int(out.min()), int(out.max())
         (dtype('uint16'), 1000, 1000)
     """
-    if model is None:
+    if model is None and (config is not None or overrides):
         model = DepthRestorer(config, **overrides)
-    elif config is not None or overrides:
+    elif model is not None and (config is not None or overrides):
         raise DepthSRError(f"restore_depth got a model and {'config' if config is not None else sorted(overrides)}; "
                            "pass either a model or the settings to build one (DepthRestorer(config, **overrides)).")
     _check_fill(fill)
     dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
     y, observed, layout = parse_depth(depth, mask, dtype)
+    if model is None:
+        model = _default_model(y, rgb, scale_factor)
     out = model._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=bool(timings) and return_details,
                      integer_input=_is_integer_dtype(layout.dtype))
     x = restore_layout(out.depth, layout)  # NaN (fill="trusted") becomes 0 in an integer dtype
@@ -485,6 +490,16 @@ def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optio
         return x
     return out._replace(depth=x, **{k: map_layout(getattr(out, k), layout)
                                     for k in ("confidence", "trusted", "outliers")})
+
+
+def _default_model(y: torch.Tensor, rgb: Any, scale_factor: Optional[int]) -> DepthRestorer:
+    """What :func:`restore_depth` runs on the parsed depth ``y (B,1,H,W)`` without a model or settings: the
+    ``default`` speed tier, a denoiser trained for K = I, or the frozen defaults when the colour is larger than the
+    depth (guided upsampling, which that model was not trained for)."""
+    upsampling = scale_factor not in (None, 1)
+    if rgb is not None and not upsampling:
+        upsampling = parse_rgb(rgb, y.shape[0], y.device, y.dtype).shape[-2:] != y.shape[-2:]
+    return DepthRestorer() if upsampling else DepthRestorer.from_preset("default")
 
 
 _LEGACY_KEYS = {"log_temperature": "block_matcher.log_temperature",

@@ -1,7 +1,7 @@
 """Named configurations, reached through :meth:`DepthRestorer.from_preset(name) <torch_depth_sr.DepthRestorer.from_preset>`
 (trained models through ``from_pretrained``). Each of :data:`PRESETS` is a set of changes to the defaults; each of
-:data:`TRAINED_PRESETS` names a shipped model that ``from_preset`` loads (the speed tiers ``fast`` and ``best``:
-:data:`TIERS`). Their measured accuracy and time are in ``docs/model-choices/`` and ``docs/speed.md``."""
+:data:`TRAINED_PRESETS` names a shipped model that ``from_preset`` loads (the speed tiers ``fast``, ``default`` and
+``best``: :data:`TIERS`). Their measured accuracy and time are in ``docs/model-choices/`` and ``docs/speed.md``."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -16,8 +16,9 @@ _NO_EXTENSIONS = dict(value_prior=None, guided_prior=None, fidelity=None, clean_
                       edge_refit=None)
 
 PRESETS: dict[str, dict[str, Any]] = {
-    # the defaults: what restore_depth(depth, rgb) runs
-    "default": {},
+    # the configuration's defaults, frozen (no trained parameter), every extension on: what restore_depth(depth, rgb)
+    # ran until 2026-12-04 and what guided upsampling still runs; the bench method "full"
+    "full": {},
     # the paper's model as it stands (model.md): 5×5 blocks, 21×21 window, k = 10, exact re-matching, x⁰ = y with
     # its holes pulled-pushed, the singular test without the library's support rules and gate. Weights stay in
     # noise-σ units, CG keeps its fixed schedule, and guided upsampling (which the paper does not model) keeps the
@@ -37,8 +38,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 # "fast": 3 layers trained end to end, one block-matching pass on x⁰ (7×7 window, 10 matches), 2 singular-test
 #   rounds, a 7×7 x⁰ filter, then a small trained edge refiner (8 channels, 2 layers); about a fifteenth of the
 #   default's time at 640×480;
+# "default": what restore_depth(depth, rgb) runs to denoise: the guidance CNN's per-pixel thresholds of
+#   "denoise-guided" with a 7×7 search window, then a 16-channel edge refiner; more accurate than "full" and about a
+#   third of its time;
 # "best": the best shipped denoiser (the guidance CNN's per-pixel thresholds and the edge refiner).
-TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast", "best": "denoise-refined"}
+TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast", "default": "denoise-default", "best": "denoise-refined"}
 
 # the speed tiers, fastest first: what each name is, for users choosing by time (docs/speed.md)
 TIERS = ("fast", "default", "best")

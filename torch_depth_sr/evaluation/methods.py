@@ -61,14 +61,15 @@ SHIPPED = {"trained": "denoise", "trained-guided": "denoise-guided", "trained-re
            "trained-x4": "upsample-x4", "trained-upsample": "upsample", "trained-upsample-area": "upsample-area"}
 # those of them that load a saved candidate instead when ``pretrained`` is given
 TAKES_PRETRAINED = ("trained", "trained-refined", "trained-x4", "trained-upsample", "trained-upsample-area")
-_MODEL_METHODS = ("tv", "tv+nl", "full", "fast", "best", "full-fast", "paper-model", *SHIPPED)
+_MODEL_METHODS = ("tv", "tv+nl", "full", "fast", "default", "best", "full-fast", "paper-model", *SHIPPED)
 
 
 # the model methods' named configurations (``DepthRestorer.from_preset``); the speed tiers (issue 27) are ``fast``,
-# ``full`` (the default) and ``best``; ``full-fast`` is the former name of ``fast``
-PRESET_OF = {"tv": "tv", "tv+nl": "tv+nl", "full": "default", "fast": "fast", "best": "best", "full-fast": "fast",
-             "paper-model": "paper"}
-TIER_METHODS = {"fast": "fast", "default": "full", "best": "best"}  # tier name -> bench method
+# ``default`` and ``best``; ``full`` is the frozen configuration's defaults (the default tier until 2026-12-04),
+# ``full-fast`` the former name of ``fast``
+PRESET_OF = {"tv": "tv", "tv+nl": "tv+nl", "full": "full", "fast": "fast", "default": "default", "best": "best",
+             "full-fast": "fast", "paper-model": "paper"}
+TIER_METHODS = {"fast": "fast", "default": "default", "best": "best"}  # tier name -> bench method
 
 
 @lru_cache(maxsize=None)

@@ -3,8 +3,8 @@
 Times, side by side in one run and on the same synthetic inputs
 (:func:`~torch_depth_sr.datasets.synthetic.make_scene` + Gaussian noise σ = 5 + holes):
 
-* ``full``, ``fast``, ``best`` — the speed tiers (``DepthRestorer.from_preset("default" | "fast" | "best")``;
-  ``full-fast`` is the former name of ``fast``), with the per-stage split the model reports in
+* ``fast``, ``default``, ``best`` — the speed tiers (``DepthRestorer.from_preset(name)``), and ``full``, the frozen
+  configuration's defaults (the default tier until 2026-12-04; ``full-fast`` is the former name of ``fast``), with the per-stage split the model reports in
   ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
   refiner, the rest = total − those) and the CG iterations of every layer;
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
@@ -58,11 +58,12 @@ __all__ = [
     "run_speed",
 ]
 
-METHODS = ("full", "fast", "best", "full-fast", "stream", "stream-fast", "bm-exact", "bm-refine", "x0-filter", "jbf",
-           "dictionary", "kornia-jbf9", "dataloader")
-# the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best
-MODEL_PRESETS = {"full": "default", "fast": "fast", "best": "best", "full-fast": "fast"}
-# "stream", "stream-fast": a step of a StreamRestorer of the default / fast model on the inputs' static scene with new
+METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fast", "bm-exact", "bm-refine",
+           "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
+# the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best,
+# and "full", the frozen configuration's defaults (the default tier until 2026-12-04)
+MODEL_PRESETS = {"full": "full", "fast": "fast", "default": "default", "best": "best", "full-fast": "fast"}
+# "stream", "stream-fast": a step of a StreamRestorer of the frozen full / the fast model on the inputs' static scene with new
 # noise (σ = 5) and the same holes every call (the warm-up calls are the stream's first, cold, frame and
 # STREAM_WARM_STEPS steps; the timed calls are later steps; the rmse is the last step's). A stream runs for thousands
 # of frames, and the timed steps are its steady state: its first steps allocate the state and new buffers (on a
@@ -82,8 +83,8 @@ STREAM_COLD = {"stream": "full", "stream-fast": "fast"}
 # frames/s.
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
-DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "best@1088x1376x8", "full-fast@1088x1376x8",
-                "stream@1088x1376x8", "stream-fast@1088x1376x8", "dictionary@1088x1376x8")
+DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "default@1088x1376x8", "best@1088x1376x8",
+                "full-fast@1088x1376x8", "stream@1088x1376x8", "stream-fast@1088x1376x8", "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "nonlocal", "cg")
 POST_STAGES = ("snap", "refine")  # the edge steps and the edge refiner (row["post_stages"])
 
@@ -134,7 +135,7 @@ def _make_runner(method: str, device: str):
         from ..model import DepthRestorer
         from ..stream import StreamRestorer
 
-        stream = StreamRestorer(DepthRestorer.from_preset("default" if method == "stream" else "fast").to(device))
+        stream = StreamRestorer(DepthRestorer.from_preset("full" if method == "stream" else "fast").to(device))
         g = torch.Generator(device="cpu").manual_seed(1)
         scene: dict = {}
 

@@ -1,8 +1,8 @@
 """Speed against accuracy: the front of the speed tiers and the baselines, and a few model settings.
 
-``python -m torch_depth_sr.evaluation.tradeoffs --front OUT [--bench-json PAPER.json SENSOR.json]`` (issue 27)
-writes the speed–accuracy picture: for the paper's model, every speed tier (``fast``, ``full`` = the default,
-``best``) and every baseline (``jbf``, ``rgf``, ``dictionary``, kornia's 9×9 JBF ``kornia-jbf9``), x = seconds per
+``python -m torch_depth_sr.evaluation.tradeoffs --front OUT [--bench-json PAPER.json SENSOR.json ...]`` (issue 27)
+writes the speed–accuracy picture: for the paper's model, every speed tier (``fast``, ``default``, ``best``),
+the frozen ``full`` model (the default tier until 2026-12-04) and every baseline (``jbf``, ``rgf``, ``dictionary``, kornia's 9×9 JBF ``kornia-jbf9``), x = seconds per
 640×480 frame (each method alone in a fresh process, 2 threads unless ``--threads``, median of ``--repeats`` after
 a warm-up, on a synthetic frame degraded by the track's protocol; kornia's JBF timed in the same process gives the
 ratio) and y = RMSE on the ten held-out 2005/2003/2001 scenes (the protocol of ``torch-depth-sr bench --track
@@ -39,9 +39,9 @@ from .tune import errors_by, fitting_samples
 __all__ = ["DEFAULT_CONFIGS", "FRONT_METHODS", "HELD_OUT", "accuracy", "front", "timing", "main"]
 
 # the methods of the speed-accuracy picture (bench method names) and the held-out scenes it reports on
-FRONT_METHODS = ("paper-model", "fast", "full", "best", "jbf", "rgf", "dictionary", "kornia-jbf9")
+FRONT_METHODS = ("paper-model", "fast", "default", "full", "best", "jbf", "rgf", "dictionary", "kornia-jbf9")
 HELD_OUT = ("Art", "Books", "Dolls", "Laundry", "Moebius", "Reindeer", "Cones", "Teddy", "Tsukuba", "Venus")
-_LABEL = {"paper-model": "paper", "fast": "fast", "full": "default", "best": "best", "jbf": "jbf", "rgf": "rgf",
+_LABEL = {"paper-model": "paper", "fast": "fast", "default": "default", "full": "full (frozen)", "best": "best", "jbf": "jbf", "rgf": "rgf",
           "dictionary": "dictionary", "kornia-jbf9": "kornia JBF 9x9"}
 
 DEFAULT_CONFIGS = (
@@ -188,7 +188,7 @@ def _plot(rows: list[dict], path) -> None:
             cv2.line(img, px(math.log10(a["seconds"]), a["rmse"]), px(math.log10(b["seconds"]), b["rmse"]),
                      (60, 160, 60), 2)
         for r in pts:
-            ours = r["method"] in ("paper-model", "fast", "full", "best")
+            ours = r["method"] in ("paper-model", "fast", "default", "full", "best")
             c = (200, 60, 20) if ours else (40, 40, 200)
             p = px(math.log10(r["seconds"]), r["rmse"])
             cv2.circle(img, p, 5, c, -1)
@@ -207,9 +207,9 @@ def front(out: Union[str, Path], bench_json: Sequence[str] = (), methods: Sequen
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     bench = {}
-    for f in bench_json:
+    for f in bench_json:  # several files of a track add up (a method added later has its own run)
         data = json.loads(Path(f).read_text())
-        bench[data["metadata"]["track"]] = data
+        bench.setdefault(data["metadata"]["track"], {"results": []})["results"].extend(data["results"])
     rows = []
     for track in ("paper", "sensor"):
         for m in methods:
@@ -238,7 +238,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--front", default=None, metavar="OUT",
                    help="write the speed-accuracy picture of the tiers and baselines to this folder")
     p.add_argument("--bench-json", nargs="*", default=[],
-                   help="with --front: bench --json files of tracks paper and sensor to take the errors from")
+                   help="with --front: bench --json files of tracks paper and sensor to take the errors from (several per "
+                        "track add up)")
     p.add_argument("--methods", nargs="*", default=list(FRONT_METHODS), help="with --front: the methods")
     p.add_argument("--threads", type=int, default=2, help="with --front: torch threads of the timing")
     p.add_argument("--configs", nargs="*", default=None,

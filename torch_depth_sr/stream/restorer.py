@@ -307,7 +307,8 @@ class StreamRestorer(nn.Module):
 
     Args:
         model: the :class:`~torch_depth_sr.DepthRestorer` to run (``from_pretrained``, ``from_preset``, trained or
-            frozen); default ``DepthRestorer()``, what :func:`~torch_depth_sr.restore_depth` runs. The stream shares
+            frozen); default ``DepthRestorer()``, the frozen configuration's defaults (preset ``"full"``; the stream's
+            settings were fitted for the ``fast`` tier, ``docs/stream.md``). The stream shares
             its parameters (:func:`with_stream`): training the stream trains ``model``.
         settings: the stream's settings (:class:`~torch_depth_sr.config.StreamConfig`, a dict of changes, or None:
             ``model.config.stream``, else the defaults).
