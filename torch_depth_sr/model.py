@@ -481,7 +481,8 @@ def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optio
     _check_fill(fill)
     dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
     y, observed, layout = parse_depth(depth, mask, dtype)
-    if model is None:
+    if model is None:  # the colour parsed once here: the model's own parse of a (B,3,H,W) float tensor only checks it
+        rgb = None if rgb is None else parse_rgb(rgb, y.shape[0], y.device, y.dtype)
         model = _default_model(y, rgb, scale_factor)
     out = model._run(y, observed, rgb, noise_sigma, scale_factor, fill, timed=bool(timings) and return_details,
                      integer_input=_is_integer_dtype(layout.dtype))
@@ -492,13 +493,11 @@ def restore_depth(depth: Any, rgb: Any = None, mask: Any = None, *, model: Optio
                                     for k in ("confidence", "trusted", "outliers")})
 
 
-def _default_model(y: torch.Tensor, rgb: Any, scale_factor: Optional[int]) -> DepthRestorer:
-    """What :func:`restore_depth` runs on the parsed depth ``y (B,1,H,W)`` without a model or settings: the
-    ``default`` speed tier, a denoiser trained for K = I, or the frozen defaults when the colour is larger than the
-    depth (guided upsampling, which that model was not trained for)."""
-    upsampling = scale_factor not in (None, 1)
-    if rgb is not None and not upsampling:
-        upsampling = parse_rgb(rgb, y.shape[0], y.device, y.dtype).shape[-2:] != y.shape[-2:]
+def _default_model(y: torch.Tensor, guide: Optional[torch.Tensor], scale_factor: Optional[int]) -> DepthRestorer:
+    """What :func:`restore_depth` runs on the parsed depth ``y (B,1,H,W)`` and colour ``guide (B,3,H',W')`` without a
+    model or settings: the ``default`` speed tier, a denoiser trained for K = I, or the frozen defaults for guided
+    upsampling (factor > 1, as the model infers it), which that tier was not trained for."""
+    upsampling = _infer_factor(y, guide, scale_factor) > 1
     return DepthRestorer() if upsampling else DepthRestorer.from_preset("default")
 
 

@@ -186,6 +186,6 @@ def top_keys(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[t
             keys[..., 0, centre].fill_(_INT64_MAX)
         top = smallest_keys(keys.view(bsz, rows * w, n_off), min(k, n_off))  # (B, rows·W, k) ascending
         if n_off < k:  # a lattice with fewer offsets than k (a 7×7 window at stride 2 has 9): the rest no candidate
-            top = torch.cat([top, top[..., :1].expand(-1, -1, k - n_off).clone().fill_(_INT64_MAX)], dim=2)
+            top = torch.cat([top, top.new_full((bsz, rows * w, k - n_off), _INT64_MAX)], dim=2)
         top_all[:, :, h0:h1] = top.transpose(1, 2).reshape(bsz, k, rows, w)
     return top_all
