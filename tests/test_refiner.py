@@ -171,6 +171,27 @@ def test_train_refiner_command_runs_and_exports_a_model(tmp_path, monkeypatch):
     assert model.refiner is not None and model.config.num_layers == 1
 
 
+def test_train_refiner_warm_start_begins_from_the_init_models_refiner(tmp_path, monkeypatch, capsys):
+    """--warm-start fine-tunes the refiner --init carries: step 0 of the second run scores what the first run
+    exported (the same recipe, the same validation samples); a refiner of another shape is refused by name."""
+    monkeypatch.setenv("TORCH_DEPTH_SR_DATA", str(tmp_path / "no-data"))
+    recipe = ["--factors", "4", "--noises", "0", "--synthetic", "1", "--channels", "4", "--layers", "1",
+              "--val-every", "3", "--batch-size", "2", "--crop", "32", "--no-progress"]
+    first = tmp_path / "first"
+    assert main(["train-refiner", "--out", str(first), "--steps", "3", "--base",
+                 '{"degradation": "bicubic", "num_layers": 1}', *recipe]) == 0
+    last = json.loads((first / "history.json").read_text())["history"][-1]
+    second = tmp_path / "second"
+    assert main(["train-refiner", "--out", str(second), "--steps", "1", "--init", str(first / "last"),
+                 "--warm-start", *recipe]) == 0
+    start = json.loads((second / "history.json").read_text())["history"][0]
+    assert (start["rmse"], start["mae"]) == pytest.approx((last["rmse"], last["mae"]), rel=1e-6)
+    wider = [a if a != "4" or recipe[i - 1] != "--channels" else "8" for i, a in enumerate(recipe)]
+    assert main(["train-refiner", "--out", str(tmp_path / "third"), "--steps", "1", "--init", str(first / "last"),
+                 "--warm-start", *wider]) != 0
+    assert "channels" in capsys.readouterr().err
+
+
 def test_train_refiner_evaluate_scores_saved_models_on_the_recipes_validation_samples(tmp_path, monkeypatch):
     """--evaluate trains nothing: the shipped area upsampler, scored on this recipe's validation samples (here the
     two held-out synthetic scenes, area ×4 with noise), beats the frozen model it refines, per group and overall;

@@ -133,6 +133,9 @@ def _add_refiner_arguments(p: argparse.ArgumentParser) -> None:
                         "capture, as the upsample-b set)")
     p.add_argument("--select", choices=["rmse", "mae"], default=d.select,
                    help="the validation metric that picks best/")
+    p.add_argument("--warm-start", action="store_true",
+                   help="start from the refiner --init carries (same --channels and --layers), not from random "
+                        "weights: fine-tune a shipped refiner")
     p.add_argument("--evaluate", nargs="+", default=None, metavar="MODEL",
                    help="train nothing: score these saved folders or pretrained names on this recipe's validation "
                         "samples (e.g. --upscale 3 for runs trained at other pitches) and write <out>/validation.json")

@@ -71,6 +71,9 @@ class RefinerConfig:
     # pixel pitch of a full-size capture is upscale 3
     upscale: int = 1
     select: str = "rmse"  # the validation metric that picks ``best``: "rmse" or "mae"
+    # start from the refiner ``init`` carries (same channels and layers) instead of random weights: to fine-tune a
+    # shipped refiner on new degradations (step 0's validation is then that refiner's, and best/ must beat it)
+    warm_start: bool = False
     val_scenes: tuple = ("Cloth4", "Wood2")
     channels: int = 32
     layers: int = 6
@@ -275,6 +278,18 @@ def _saved_model(name: str, overrides: Optional[dict] = None) -> DepthRestorer:
     return model.eval()
 
 
+def _warm_start(refiner: EdgeRefiner, base: DepthRestorer, cfg: RefinerConfig) -> None:
+    """``refiner`` takes the weights of the refiner ``base`` (``cfg.init``) carries; its shape must be the same."""
+    own = base.refiner
+    if cfg.init is None or own is None:
+        raise ValueError(f"warm_start needs an init model with an edge refiner; init={cfg.init!r} has none")
+    shape = (base.config.refiner.channels, base.config.refiner.layers)
+    if shape != (cfg.channels, cfg.layers):
+        raise ValueError(f"warm_start: {cfg.init!r}'s refiner has channels, layers = {shape}; "
+                         f"got channels={cfg.channels}, layers={cfg.layers}")
+    refiner.load_state_dict(own.state_dict())
+
+
 def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folder: Path) -> None:
     model = DepthRestorer(base.config.replace(refiner={"channels": cfg.channels, "layers": cfg.layers,
                                                        "task": cfg.task}))
@@ -295,6 +310,8 @@ def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     train_scenes, val_scenes = _scenes(cfg)
     t0 = time.perf_counter()
     refiner = EdgeRefiner(cfg.channels, cfg.layers)
+    if cfg.warm_start:
+        _warm_start(refiner, base, cfg)
     train_samples = _samples(base, refiner, train_scenes, cfg, "training")
     val_samples = _samples(base, refiner, val_scenes, cfg, "validation")
     prepare_seconds = time.perf_counter() - t0
