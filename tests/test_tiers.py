@@ -25,13 +25,16 @@ def test_every_tier_is_a_name_of_from_preset():
     assert TIERS == ("fast", "default", "best")
     assert set(TIERS) <= set(PRESETS) | set(TRAINED_PRESETS)
     assert DepthRestorer.from_preset("full").config == DepthRestorer().config  # the frozen defaults
-    for tier, shipped in (("default", "denoise-default"), ("best", "denoise-refined")):
+    for tier, shipped in (("default", "denoise-default"), ("best", "denoise-best")):
         model, saved = DepthRestorer.from_preset(tier), DepthRestorer.from_pretrained(shipped)
         assert model.config == saved.config
         assert all(torch.equal(a, b) for a, b in zip(model.state_dict().values(), saved.state_dict().values()))
+    # best is denoise-refined with its refiner fine-tuned (tenth stop): the same configuration and layers
     best, refined = DepthRestorer.from_preset("best"), DepthRestorer.from_pretrained("denoise-refined")
     assert best.config == refined.config
-    assert all(torch.equal(a, b) for a, b in zip(best.state_dict().values(), refined.state_dict().values()))
+    same = {k: torch.equal(v, refined.state_dict()[k]) for k, v in best.state_dict().items()}
+    assert all(v for k, v in same.items() if not k.startswith("refiner."))
+    assert not all(v for k, v in same.items() if k.startswith("refiner."))
     fast = DepthRestorer.from_preset("fast")
     assert fast.config == preset_config("fast") == DepthRestorer.from_pretrained(TRAINED_PRESETS["fast"]).config
     assert fast.config.block_matching.match_layers == ()  # one block-matching pass, on x⁰

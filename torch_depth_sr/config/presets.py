@@ -41,8 +41,9 @@ PRESETS: dict[str, dict[str, Any]] = {
 # "default": what restore_depth(depth, rgb) runs to denoise: the guidance CNN's per-pixel thresholds of
 #   "denoise-guided" with a 7×7 search window, then a 16-channel edge refiner; more accurate than "full" and about a
 #   third of its time;
-# "best": the best shipped denoiser (the guidance CNN's per-pixel thresholds and the edge refiner).
-TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast", "default": "denoise-default", "best": "denoise-refined"}
+# "best": the best shipped denoiser: "denoise-refined" (the guidance CNN's per-pixel thresholds and the edge refiner)
+#   with its refiner fine-tuned on near-clean noise as well, so that a near-clean map does not come out worse.
+TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast", "default": "denoise-default", "best": "denoise-best"}
 
 # the speed tiers, fastest first: what each name is, for users choosing by time (docs/speed.md)
 TIERS = ("fast", "default", "best")
