@@ -145,3 +145,22 @@ def test_default_skip_covers_every_model_method_at_the_largest_batch():
     (h, w), b = max(SIZES), max(BATCHES)
     assert {f"{m}@{h}x{w}x{b}" for m in model_methods} <= set(DEFAULT_SKIP)
     assert all(tag.split("@")[0] in METHODS for tag in DEFAULT_SKIP)
+
+
+def test_the_fronts_bench_files_replace_a_method_measured_again(tmp_path):
+    """``tradeoffs --bench-json`` with several files: a later file's rows of a method replace the earlier file's
+    (before, the two runs' scenes were pooled, and a retrained tier read as the mean of old and new)."""
+    import json
+
+    from torch_depth_sr.evaluation.tradeoffs import _merged_bench
+
+    def write(name, rows):
+        p = tmp_path / name
+        p.write_text(json.dumps({"metadata": {"track": "paper"}, "results": rows}))
+        return p
+
+    old = write("old.json", [{"method": "fast", "scene": "Art", "rmse": 2.0}, {"method": "rgf", "scene": "Art",
+                                                                               "rmse": 3.0}])
+    new = write("new.json", [{"method": "fast", "scene": "Art", "rmse": 1.0}])
+    rows = _merged_bench([old, new])["paper"]["results"]
+    assert sorted((r["method"], r["rmse"]) for r in rows) == [("fast", 1.0), ("rgf", 3.0)]

@@ -200,16 +200,25 @@ def _plot(rows: list[dict], path) -> None:
     write_png(path, img)
 
 
+def _merged_bench(files: Sequence[Union[str, Path]]) -> dict:
+    """``bench --json`` files by track: the rows of every file, where a later file's method replaces that method's
+    rows of the files before it (a method added, or measured again after a change: never the mean of two runs)."""
+    bench: dict = {}
+    for f in files:
+        data = json.loads(Path(f).read_text())
+        rows = bench.setdefault(data["metadata"]["track"], {"results": []})["results"]
+        again = {r["method"] for r in data["results"]}
+        rows[:] = [r for r in rows if r["method"] not in again] + list(data["results"])
+    return bench
+
+
 def front(out: Union[str, Path], bench_json: Sequence[str] = (), methods: Sequence[str] = FRONT_METHODS,
           repeats: int = 3, threads: Optional[int] = 2, log: Callable[[str], None] = print) -> list[dict]:
     """The speed-accuracy picture (module docstring): ``out/front.png``, ``front.md``, ``front.json``."""
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    bench = {}
-    for f in bench_json:  # several files of a track add up (a method added later has its own run)
-        data = json.loads(Path(f).read_text())
-        bench.setdefault(data["metadata"]["track"], {"results": []})["results"].extend(data["results"])
+    bench = _merged_bench(bench_json)
     rows = []
     for track in ("paper", "sensor"):
         for m in methods:
