@@ -31,6 +31,12 @@ refiner was retrained with near-clean noise as well (σ 0.5 beside 3, 5 and 8; 1
 0.2987). The layers are unchanged; the same ``--fast-only`` command made the three entries again, every other entry
 kept byte for byte.
 
+**Entries added later, on purpose (issue 27, tenth stop, 2026-12-04): ``shipped/denoise-default/*`` and
+``shipped/denoise-best/*``**, the ``default`` and ``best`` speed tiers, which did not exist at 046c797. They were made
+with the code of that stop, every other entry and the inputs kept byte for byte, by
+
+    OMP_NUM_THREADS=1 python tests/golden/make_golden.py --add-shipped denoise-default denoise-best
+
 Inputs (tiny, deterministic; stored so that the test does not depend on the scene generator): one synthetic scene
 (``make_scene(32, 40, seed=7)``), its colour image at 32x40 (the output size of every task); denoising: Gaussian noise
 sigma = 3, two holes, five impulses and five flying pixels; guided upsampling x2 and x4: the ground truth area-averaged
@@ -118,6 +124,21 @@ def refresh_fast() -> None:
     torch.save(outputs, HERE / "outputs.pt")
 
 
+def add_shipped(names: list[str]) -> None:
+    """Store the ``shipped/<name>/*`` entries of shipped models made after 046c797 (denoising and x2 / x4 area
+    upsampling) with the current code; every other entry and the inputs kept as stored (the module docstring)."""
+    from torch_depth_sr import DepthRestorer
+
+    torch.set_num_threads(1)
+    inputs = torch.load(HERE / "inputs.pt", weights_only=True)
+    outputs = torch.load(HERE / "outputs.pt", weights_only=True)
+    for name in names:
+        model = DepthRestorer.from_pretrained(name)
+        for task in ("denoise", "x2/area", "x4/area"):
+            _store(outputs, f"shipped/{name}/{task}", model, inputs, task)
+    torch.save(outputs, HERE / "outputs.pt")
+
+
 def _store(outputs: dict, key: str, model, inputs: dict, task: str) -> None:
     """One case's outputs: the depth, and the confidence of denoising."""
     r = model.restore_with_details(inputs[task], inputs["rgb"])
@@ -144,5 +165,7 @@ def main() -> None:
 if __name__ == "__main__":
     if "--fast-only" in sys.argv[1:]:
         refresh_fast()
+    elif sys.argv[1:2] == ["--add-shipped"]:
+        add_shipped(sys.argv[2:])
     else:
         main()
