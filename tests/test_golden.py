@@ -27,7 +27,7 @@ from torch_depth_sr import DepthRestorer
 GOLDEN = Path(__file__).resolve().parent / "golden"
 NAMED = ("default", "fast", "paper", "tv", "tv+nl")
 SHIPPED = ("denoise", "denoise-guided", "denoise-refined", "upsample", "upsample-area", "upsample-x4",
-           "upsample-x4-refined", "denoise-default", "denoise-best")  # the last two added on 2026-12-04 (make_golden.py)
+           "upsample-x4-refined", "denoise-default", "denoise-best")  # the last two added 2026-12-04 (make_golden.py)
 
 
 @functools.lru_cache(maxsize=1)

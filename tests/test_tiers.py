@@ -217,3 +217,21 @@ def test_restore_depth_runs_the_default_tier_to_denoise_and_the_frozen_defaults_
         up = restore_depth(low, s["rgb"])
         assert up.shape[-2:] == depth.shape[-2:]
         assert torch.equal(up, restore_depth(low, s["rgb"], model=DepthRestorer()))
+
+
+def test_restore_depth_loads_its_default_model_once(monkeypatch):
+    """The trained default tier is read from its files once per process, not on every call (about 50 ms each, paid
+    per frame by a DataLoader calling restore_depth)."""
+    from torch_depth_sr import model as model_module
+    from torch_depth_sr import restore_depth
+
+    model_module._shipped_default.cache_clear()
+    loads = []
+    real = DepthRestorer.from_preset.__func__
+    counted = classmethod(lambda cls, *a, **k: loads.append(a) or real(cls, *a, **k))
+    monkeypatch.setattr(DepthRestorer, "from_preset", counted)
+    depth = 50 + torch.randn(1, 1, 24, 32, generator=torch.Generator().manual_seed(0))
+    first = restore_depth(depth, torch.rand(1, 3, 24, 32, generator=torch.Generator().manual_seed(1)))
+    again = restore_depth(depth, torch.rand(1, 3, 24, 32, generator=torch.Generator().manual_seed(1)))
+    assert torch.equal(first, again) and loads == [("default",)]
+    model_module._shipped_default.cache_clear()

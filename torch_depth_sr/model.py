@@ -15,6 +15,7 @@ of the task (``post[task]``).
 """
 from __future__ import annotations
 
+import functools
 import pickle
 import time
 from dataclasses import replace
@@ -499,8 +500,15 @@ def _default_model(y: torch.Tensor, guide: Optional[torch.Tensor], scale_factor:
     """What :func:`restore_depth` runs on the parsed depth ``y (B,1,H,W)`` and colour ``guide (B,3,H',W')`` without a
     model or settings: the ``default`` speed tier, a denoiser trained for K = I, or the frozen defaults for guided
     upsampling (factor > 1, as the model infers it), which that tier was not trained for."""
-    upsampling = _infer_factor(y, guide, scale_factor) > 1
-    return DepthRestorer() if upsampling else DepthRestorer.from_preset("default")
+    return _shipped_default(_infer_factor(y, guide, scale_factor) > 1)
+
+
+@functools.lru_cache(maxsize=2)
+def _shipped_default(upsampling: bool) -> DepthRestorer:
+    """The two default models, built once per process: loading the trained tier from its files takes about 50 ms,
+    a cost a DataLoader calling :func:`restore_depth` per frame would pay every frame. Frozen and in eval mode;
+    :func:`restore_depth` only runs them."""
+    return (DepthRestorer() if upsampling else DepthRestorer.from_preset("default")).eval()
 
 
 _LEGACY_KEYS = {"log_temperature": "block_matcher.log_temperature",

@@ -114,14 +114,7 @@ def refresh_fast() -> None:
     and the inputs kept as stored (see the module docstring)."""
     from torch_depth_sr import DepthRestorer
 
-    torch.set_num_threads(1)
-    inputs = torch.load(HERE / "inputs.pt", weights_only=True)
-    outputs = torch.load(HERE / "outputs.pt", weights_only=True)
-    model = DepthRestorer.from_preset("fast")
-    for kind, name, task in cases():
-        if (kind, name) == ("named", "fast"):
-            _store(outputs, f"{kind}/{name}/{task}", model, inputs, task)
-    torch.save(outputs, HERE / "outputs.pt")
+    _rewrite({"named/fast": DepthRestorer.from_preset("fast")})
 
 
 def add_shipped(names: list[str]) -> None:
@@ -129,13 +122,18 @@ def add_shipped(names: list[str]) -> None:
     upsampling) with the current code; every other entry and the inputs kept as stored (the module docstring)."""
     from torch_depth_sr import DepthRestorer
 
+    _rewrite({f"shipped/{name}": DepthRestorer.from_pretrained(name) for name in names})
+
+
+def _rewrite(models: dict) -> None:
+    """(Re)make the denoising and x2 / x4 area entries under each key prefix (``"named/fast"``) with its model, on one
+    thread; every other entry and the inputs stay as stored."""
     torch.set_num_threads(1)
     inputs = torch.load(HERE / "inputs.pt", weights_only=True)
     outputs = torch.load(HERE / "outputs.pt", weights_only=True)
-    for name in names:
-        model = DepthRestorer.from_pretrained(name)
+    for prefix, model in models.items():
         for task in ("denoise", "x2/area", "x4/area"):
-            _store(outputs, f"shipped/{name}/{task}", model, inputs, task)
+            _store(outputs, f"{prefix}/{task}", model, inputs, task)
     torch.save(outputs, HERE / "outputs.pt")
 
 

@@ -4,8 +4,8 @@ Times, side by side in one run and on the same synthetic inputs
 (:func:`~torch_depth_sr.datasets.synthetic.make_scene` + Gaussian noise σ = 5 + holes):
 
 * ``fast``, ``default``, ``best`` — the speed tiers (``DepthRestorer.from_preset(name)``), and ``full``, the frozen
-  configuration's defaults (the default tier until 2026-12-04; ``full-fast`` is the former name of ``fast``), with the per-stage split the model reports in
-  ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
+  configuration's defaults (the default tier until 2026-12-04; ``full-fast`` is the former name of ``fast``), with
+  the per-stage split the model reports in ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
   refiner, the rest = total − those) and the CG iterations of every layer;
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
 * ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
@@ -63,8 +63,8 @@ METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fas
 # the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best,
 # and "full", the frozen configuration's defaults (the default tier until 2026-12-04)
 MODEL_PRESETS = {"full": "full", "fast": "fast", "default": "default", "best": "best", "full-fast": "fast"}
-# "stream", "stream-fast": a step of a StreamRestorer of the frozen full / the fast model on the inputs' static scene with new
-# noise (σ = 5) and the same holes every call (the warm-up calls are the stream's first, cold, frame and
+# "stream", "stream-fast": a step of a StreamRestorer of the frozen full / the fast model on the inputs' static scene
+# with new noise (σ = 5) and the same holes every call (the warm-up calls are the stream's first, cold, frame and
 # STREAM_WARM_STEPS steps; the timed calls are later steps; the rmse is the last step's). A stream runs for thousands
 # of frames, and the timed steps are its steady state: its first steps allocate the state and new buffers (on a
 # 1376×1088 frame the first step took 3.0 s and the later ones 1.5–2.1), and a static pixel takes the stream's fewer

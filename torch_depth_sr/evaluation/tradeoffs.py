@@ -2,11 +2,12 @@
 
 ``python -m torch_depth_sr.evaluation.tradeoffs --front OUT [--bench-json PAPER.json SENSOR.json ...]`` (issue 27)
 writes the speed–accuracy picture: for the paper's model, every speed tier (``fast``, ``default``, ``best``),
-the frozen ``full`` model (the default tier until 2026-12-04) and every baseline (``jbf``, ``rgf``, ``dictionary``, kornia's 9×9 JBF ``kornia-jbf9``), x = seconds per
-640×480 frame (each method alone in a fresh process, 2 threads unless ``--threads``, median of ``--repeats`` after
-a warm-up, on a synthetic frame degraded by the track's protocol; kornia's JBF timed in the same process gives the
-ratio) and y = RMSE on the ten held-out 2005/2003/2001 scenes (the protocol of ``torch-depth-sr bench --track
-paper|sensor``; taken from ``bench --json`` files when given, else run here), one panel per track:
+the frozen ``full`` model (the default tier until 2026-12-04) and every baseline (``jbf``, ``rgf``, ``dictionary``,
+kornia's 9×9 JBF ``kornia-jbf9``), x = seconds per 640×480 frame (each method alone in a fresh process, 2 threads
+unless ``--threads``, median of ``--repeats`` after a warm-up, on a synthetic frame degraded by the track's protocol;
+kornia's JBF timed in the same process gives the ratio) and y = RMSE on the ten held-out 2005/2003/2001 scenes
+(the protocol of ``torch-depth-sr bench --track paper|sensor``; taken from ``bench --json`` files when given, else
+run here), one panel per track:
 ``OUT/front.png``, ``OUT/front.md`` (the table) and ``OUT/front.json``.
 
 ``python -m torch_depth_sr.evaluation.tradeoffs [--configs JSON ...] [--part accuracy|timing|both]``
@@ -41,8 +42,8 @@ __all__ = ["DEFAULT_CONFIGS", "FRONT_METHODS", "HELD_OUT", "accuracy", "front", 
 # the methods of the speed-accuracy picture (bench method names) and the held-out scenes it reports on
 FRONT_METHODS = ("paper-model", "fast", "default", "full", "best", "jbf", "rgf", "dictionary", "kornia-jbf9")
 HELD_OUT = ("Art", "Books", "Dolls", "Laundry", "Moebius", "Reindeer", "Cones", "Teddy", "Tsukuba", "Venus")
-_LABEL = {"paper-model": "paper", "fast": "fast", "default": "default", "full": "full (frozen)", "best": "best", "jbf": "jbf", "rgf": "rgf",
-          "dictionary": "dictionary", "kornia-jbf9": "kornia JBF 9x9"}
+_LABEL = {"paper-model": "paper", "fast": "fast", "default": "default", "full": "full (frozen)", "best": "best",
+          "jbf": "jbf", "rgf": "rgf", "dictionary": "dictionary", "kornia-jbf9": "kornia JBF 9x9"}
 
 DEFAULT_CONFIGS = (
     {},
@@ -247,8 +248,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--front", default=None, metavar="OUT",
                    help="write the speed-accuracy picture of the tiers and baselines to this folder")
     p.add_argument("--bench-json", nargs="*", default=[],
-                   help="with --front: bench --json files of tracks paper and sensor to take the errors from (several per "
-                        "track add up)")
+                   help="with --front: bench --json files of tracks paper and sensor to take the errors from (a "
+                        "later file's rows of a method replace the earlier files')")
     p.add_argument("--methods", nargs="*", default=list(FRONT_METHODS), help="with --front: the methods")
     p.add_argument("--threads", type=int, default=2, help="with --front: torch threads of the timing")
     p.add_argument("--configs", nargs="*", default=None,

@@ -52,5 +52,6 @@ for spec in specs:
         noisy = (adepth + sigma * np.random.default_rng(0).standard_normal(adepth.shape)).astype(np.float32)
         noisy[adepth == 0] = 0
         m = adepth > 0
-        out.append(f"art s{sigma} {rmse(restore_depth(noisy, argb, model=model), adepth, m):.4f}/{rmse(noisy, adepth, m):.4f}")
+        restored = restore_depth(noisy, argb, model=model)
+        out.append(f"art s{sigma} {rmse(restored, adepth, m):.4f}/{rmse(noisy, adepth, m):.4f}")
     print(spec, " | ".join(out), flush=True)
