@@ -413,7 +413,7 @@ def test_cli_restores_recordings_like_restore_depth(root, tmp_path, capsys):
     line = capsys.readouterr().out.strip()
     assert line.startswith("restored 1 sequence (3 frames)") and "3 written, 0 already done, 0 failed" in line
     (seq,) = discover_recordings(root / "nested")
-    model = DepthRestorer()
+    model = None  # the CLI without --preset or --pretrained runs restore_depth's default
     old = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
@@ -438,6 +438,7 @@ def test_cli_restores_recordings_like_restore_depth(root, tmp_path, capsys):
     (["--skip-existing"], "use --resume"),
     (["--in-place"], "--in-place"),
     (["--pretrained", "nope"], "no pretrained parameters named 'nope'"),
+    (["--preset", "nope"], "--preset 'nope': unknown preset 'nope'"),
     (["--threads", "0"], "expected a whole number >= 1"),
     (["--max-time-difference", "-1"], "seconds > 0"),
 ])
@@ -460,6 +461,23 @@ def test_frame_by_frame_adapter_is_restore_depth():
     r.reset()
     assert np.array_equal(r.step(d, rgb), restore_depth(d, rgb[None], model=m))
     assert PretrainedRestorer("denoise")().model.config == DepthRestorer.from_pretrained("denoise").config
+    assert PretrainedRestorer(preset="fast")().model.config == DepthRestorer.from_preset("fast").config
+
+
+def test_frame_by_frame_without_a_model_runs_restore_depths_default():
+    """No model named: each frame gets what restore_depth runs without one (the default tier to denoise), not the
+    frozen full model."""
+    from torch_depth_sr import DepthRestorer, restore_depth
+
+    import torch
+
+    d = _depth(0, 0)
+    rgb = torch.from_numpy(_colour(0, 0).astype(np.float32) / 255).permute(2, 0, 1)
+    r = PretrainedRestorer()()
+    assert r.model is None
+    got = r.step(d, rgb)
+    assert np.array_equal(got, restore_depth(d, rgb[None]))
+    assert np.array_equal(got, restore_depth(d, rgb[None], model=DepthRestorer.from_preset("default")))
 
 
 # ---- torchrun ---------------------------------------------------------------------------------------------------

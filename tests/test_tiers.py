@@ -219,6 +219,46 @@ def test_restore_depth_runs_the_default_tier_to_denoise_and_the_frozen_defaults_
         assert torch.equal(up, restore_depth(low, s["rgb"], model=DepthRestorer()))
 
 
+def test_the_transform_and_the_cli_default_to_what_restore_depth_runs(tmp_path):
+    """Nothing named: RestoreDepth() and `torch-depth-sr restore` run restore_depth's default (the trained default
+    tier to denoise, the frozen defaults to upsample), not the frozen full model everywhere; --preset names a tier."""
+    import numpy as np
+
+    from torch_depth_sr import restore_depth
+    from torch_depth_sr.cli import main
+    import cv2
+
+    from torch_depth_sr.datasets.io import read_depth_stored, write_depth
+    from torch_depth_sr.datasets.synthetic import make_scene
+    from torch_depth_sr.model import default_model_for
+    from torch_depth_sr.transforms import RestoreDepth
+
+    s = make_scene(32, 40, seed=2)
+    depth = (s["gt"] + torch.randn(s["gt"].shape, generator=torch.Generator().manual_seed(0))).clamp_min(1)
+    with torch.no_grad():
+        want = restore_depth(depth, s["rgb"])
+        low = depth[..., ::2, ::2].contiguous()
+        up = restore_depth(low, s["rgb"])
+    assert default_model_for(depth, s["rgb"]) is default_model_for(depth.reshape(32, 40).numpy(), s["rgb"].reshape(3, 32, 40))
+    assert default_model_for(low, s["rgb"]).config == DepthRestorer().config
+    t = RestoreDepth()
+    assert t.restorer is None and "restore_depth's default" in repr(t)
+    assert torch.equal(t({"depth": depth.clone(), "rgb": s["rgb"]})["depth"], want)
+    assert torch.equal(t({"depth": low.clone(), "rgb": s["rgb"]})["depth"], up)
+    # the command line, one 16-bit map and its colour
+    mm = (depth.reshape(32, 40).numpy() * 10).astype(np.uint16)
+    rgb8 = (s["rgb"].reshape(3, 32, 40).permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
+    write_depth(tmp_path / "d.png", mm)
+    cv2.imwrite(str(tmp_path / "c.png"), rgb8[:, :, ::-1])
+    for flags, model in (([], None), (["--preset", "fast"], DepthRestorer.from_preset("fast"))):
+        out = tmp_path / f"out{len(flags)}.png"
+        assert main(["restore", str(tmp_path / "d.png"), str(tmp_path / "c.png"), "-o", str(out)] + flags) == 0
+        colour = torch.from_numpy(rgb8).permute(2, 0, 1)[None]
+        with torch.no_grad():
+            expected = restore_depth(read_depth_stored(tmp_path / "d.png"), colour, model=model)
+        assert np.array_equal(read_depth_stored(out), expected)
+
+
 def test_restore_depth_loads_its_default_model_once(monkeypatch):
     """The trained default tier is read from its files once per process, not on every call (about 50 ms each, paid
     per frame by a DataLoader calling restore_depth)."""

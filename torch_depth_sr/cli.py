@@ -183,7 +183,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="guided upsampling factor (default: from the sizes of depth and colour)")
     r.add_argument("--confidence", default=None,
                    help="also write the confidence map (8-bit PNG, 255 = trusted) to this .png file or folder")
-    r.add_argument("--pretrained", default=None, help="name of shipped parameters (see DepthRestorer.from_pretrained)")
+    named = r.add_mutually_exclusive_group()
+    named.add_argument("--preset", default=None,
+                       help="a named model (DepthRestorer.from_preset): the speed tiers fast, default, best, or full, "
+                            "paper, ... (docs/speed.md). Default: what restore_depth runs, the default tier to denoise "
+                            "and the frozen full model for guided upsampling")
+    named.add_argument("--pretrained", default=None,
+                       help="name of shipped parameters (see DepthRestorer.from_pretrained)")
     r.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers for folders")
     r.set_defaults(func=cmd_restore)
     # ---- issue 28: restore --recordings ROOT OUT (torch_depth_sr/recordings/cli.py) ----

@@ -45,6 +45,8 @@ __all__ = [
     "DepthRestorer",
     "FILL_MODES",
     "restore_depth",
+    "default_model",
+    "default_model_for",
     "NoiseSigma",
 ]
 
@@ -500,15 +502,60 @@ def _default_model(y: torch.Tensor, guide: Optional[torch.Tensor], scale_factor:
     """What :func:`restore_depth` runs on the parsed depth ``y (B,1,H,W)`` and colour ``guide (B,3,H',W')`` without a
     model or settings: the ``default`` speed tier, a denoiser trained for K = I, or the frozen defaults for guided
     upsampling (factor > 1, as the model infers it), which that tier was not trained for."""
-    return _shipped_default(_infer_factor(y, guide, scale_factor) > 1)
+    return _shipped_default(_infer_factor(y, guide, scale_factor) > 1, str(y.device))
 
 
-@functools.lru_cache(maxsize=2)
-def _shipped_default(upsampling: bool) -> DepthRestorer:
-    """The two default models, built once per process: loading the trained tier from its files takes about 50 ms,
-    a cost a DataLoader calling :func:`restore_depth` per frame would pay every frame. Frozen and in eval mode;
-    :func:`restore_depth` only runs them."""
-    return (DepthRestorer() if upsampling else DepthRestorer.from_preset("default")).eval()
+def default_model(upsampling: bool = False, device: Union[str, torch.device] = "cpu") -> DepthRestorer:
+    """The model :func:`restore_depth` runs when it is given none, on ``device``: the ``default`` speed tier
+    (``DepthRestorer.from_preset("default")``, a trained denoiser), or for guided upsampling (``upsampling``) the
+    frozen defaults (``DepthRestorer()``, preset ``"full"``), which that tier was not trained for. The CLI's
+    ``restore`` and :class:`~torch_depth_sr.transforms.RestoreDepth` run it when nothing names a model.
+
+    Built once per process and device and shared: in eval mode, to be run, not trained or changed (build one with
+    ``DepthRestorer.from_preset`` for that)."""
+    return _shipped_default(bool(upsampling), str(torch.device(device)))
+
+
+def default_model_for(depth: Any, rgb: Any = None, scale_factor: Optional[int] = None,
+                      device: Union[str, torch.device] = "cpu") -> DepthRestorer:
+    """:func:`default_model` for these inputs, as :func:`restore_depth` would choose it: guided upsampling when the
+    colour is larger than the depth or ``scale_factor`` > 1. Reads the sizes only: ``depth`` in any layout
+    ``restore_depth`` takes (its last two dimensions), ``rgb`` ``(…,3,H,W)`` or an ``H×W×3`` numpy array."""
+    if rgb is None:
+        return default_model(False, device)
+    numpy_image = not isinstance(rgb, torch.Tensor) and len(rgb.shape) == 3 and rgb.shape[-1] == 3
+    size = tuple(rgb.shape[:2]) if numpy_image else tuple(rgb.shape[-2:])
+    return default_model(size != tuple(depth.shape[-2:]) or (scale_factor or 1) > 1, device)
+
+
+def load_named_model(preset: Optional[str] = None, pretrained: Optional[str] = None,
+                     device: Union[str, torch.device] = "cpu") -> Optional[DepthRestorer]:
+    """The model a command line names, on ``device``: ``DepthRestorer.from_preset(preset)`` (a speed tier or another
+    named configuration) or ``DepthRestorer.from_pretrained(pretrained)``; None when neither is given (the caller
+    runs :func:`default_model`). :class:`~torch_depth_sr.errors.UsageError` for both, or for an unknown name; a
+    shipped file that cannot be read stays a :class:`~torch_depth_sr.errors.ModelFileError`."""
+    from .errors import UsageError
+
+    if preset is not None and pretrained is not None:
+        raise UsageError(f"--preset {preset!r} and --pretrained {pretrained!r}: give one of them")
+    if preset is None and pretrained is None:
+        return None
+    flag, name = ("--preset", preset) if preset is not None else ("--pretrained", pretrained)
+    try:
+        model = DepthRestorer.from_preset(preset) if preset is not None else DepthRestorer.from_pretrained(pretrained)
+    except ModelFileError:
+        raise  # shipped files that cannot be read: a failure, not a usage mistake
+    except ValueError as e:
+        raise UsageError(f"{flag} {name!r}: {e}") from e
+    return model.to(device)
+
+
+@functools.lru_cache(maxsize=8)
+def _shipped_default(upsampling: bool, device: str = "cpu") -> DepthRestorer:
+    """:func:`default_model`, cached: loading the trained tier from its files takes about 50 ms, a cost a
+    DataLoader calling :func:`restore_depth` per frame would pay every frame."""
+    model = DepthRestorer() if upsampling else DepthRestorer.from_preset("default")
+    return model.eval().to(device)
 
 
 _LEGACY_KEYS = {"log_temperature": "block_matcher.log_temperature",

@@ -205,17 +205,11 @@ def restore_paths(args: argparse.Namespace) -> int:
 
 
 def _load_model(args):
-    from .model import DepthRestorer
+    """The model ``--preset`` or ``--pretrained`` names, on ``--device``; None when neither: each file then gets
+    what ``restore_depth`` runs without a model (:func:`~torch_depth_sr.model.default_model`)."""
+    from .model import load_named_model
 
-    if not args.pretrained:
-        return DepthRestorer().to(args.device)
-    try:
-        model = DepthRestorer.from_pretrained(args.pretrained)
-    except ModelFileError:
-        raise  # shipped files that cannot be read: a failure, not a usage mistake
-    except ValueError as e:
-        raise UsageError(f"--pretrained {args.pretrained!r}: {e}") from e
-    return model.to(args.device)
+    return load_named_model(getattr(args, "preset", None), args.pretrained, args.device)
 
 
 def _restore_single(model, job: Job, args) -> int:
@@ -278,6 +272,10 @@ def _restore_one(model, job: Job, depth: np.ndarray, rgb: Optional[np.ndarray], 
     from .model import restore_depth
 
     rgb_t = None if rgb is None else torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1)[None].to(args.device)
+    if model is None:  # restore_depth's default for this file (denoising or guided upsampling), on --device
+        from .model import default_model_for
+
+        model = default_model_for(depth, rgb, args.scale_factor, args.device)
     with torch.no_grad():
         res = restore_depth(_to_model_input(depth), rgb_t, model=model, scale_factor=args.scale_factor,
                             return_details=True)

@@ -528,7 +528,7 @@ def _hw(key: str, v: Any) -> Tuple[int, int]:
 
 # ---- restoration -----------------------------------------------------------------------------
 class RestoreDepth(Transform):
-    """Replace ``sample["depth"]`` by the frozen restorer's output (no gradients, no randomness).
+    """Replace ``sample["depth"]`` by a frozen restorer's output (no gradients, no randomness).
 
     Works on one sample ``(1,H,W)``/``(H,W)`` (per sample on CPU, e.g. in ``DataLoader`` workers)
     or on a collated batch ``(B,1,H,W)`` (batched, e.g. on a GPU after collation). The colour
@@ -539,7 +539,9 @@ class RestoreDepth(Transform):
     Args:
         restorer: a :class:`~torch_depth_sr.DepthRestorer` (default: a new frozen one built from
             ``config``/``overrides``, or ``DepthRestorer.from_preset(preset)``, or
-            ``DepthRestorer.from_pretrained(pretrained)``).
+            ``DepthRestorer.from_pretrained(pretrained)``). When nothing names a model, each sample gets what
+            :func:`~torch_depth_sr.restore_depth` runs without one: the ``default`` speed tier to denoise, the
+            frozen defaults (preset ``"full"``) for guided upsampling.
         preset: a named model by :meth:`DepthRestorer.from_preset <torch_depth_sr.DepthRestorer.from_preset>`: a
             speed tier (``"fast"``, ``"default"``, ``"best"``; ``docs/speed.md``) or another named configuration
             (``"paper"``, ...); ``overrides`` apply to it.
@@ -570,14 +572,16 @@ class RestoreDepth(Transform):
                 restorer = DepthRestorer.from_preset(preset, **overrides)
             elif pretrained is not None:
                 restorer = DepthRestorer.from_pretrained(pretrained)
-            else:
+            elif config is not None or overrides:
                 restorer = DepthRestorer(config, **overrides)
         elif not isinstance(restorer, DepthRestorer):
             raise DepthSRError(f"restorer must be a DepthRestorer; got {type(restorer).__name__}.")
-        restorer = restorer.eval()
-        for p in restorer.parameters():
-            p.requires_grad_(False)
-        self.restorer = restorer.to(device)
+        if restorer is not None:
+            restorer = restorer.eval()
+            for p in restorer.parameters():
+                p.requires_grad_(False)
+            restorer = restorer.to(device)
+        self.restorer = restorer  # None: restore_depth's default, per sample (on ``device``)
         self.device = torch.device(device)
         self.keep_input, self.with_confidence = keep_input, bool(with_confidence)
 
@@ -611,4 +615,6 @@ class RestoreDepth(Transform):
         return d
 
     def __repr__(self) -> str:
+        if self.restorer is None:
+            return f"RestoreDepth(model=restore_depth's default, device='{self.device}')"
         return f"RestoreDepth(num_layers={self.restorer.config.num_layers}, device='{self.device}')"

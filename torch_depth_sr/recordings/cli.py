@@ -45,7 +45,7 @@ def _threads(text: str) -> int:
 
 
 def add_recordings_arguments(parser: argparse.ArgumentParser) -> None:
-    """The ``--recordings`` options of ``restore`` (``--overwrite``, ``--workers``, ``--pretrained``, ``--device``
+    """The ``--recordings`` options of ``restore`` (``--overwrite``, ``--workers``, ``--preset``, ``--pretrained``, ``--device``
     and ``--scale-factor`` are ``restore``'s own and keep their meaning)."""
     g = parser.add_argument_group("whole recordings (--recordings ROOT OUT)", RECORDINGS_HELP)
     g.add_argument("--recordings", metavar="ROOT", default=None,
@@ -85,8 +85,9 @@ def restore_recordings(args: argparse.Namespace) -> int:
     if getattr(args, "resume", False) and getattr(args, "skip_existing", False):
         raise UsageError("--resume and --skip-existing: use --resume alone")
     kwargs = {} if args.scale_factor is None else {"scale_factor": args.scale_factor}
-    factory = PretrainedRestorer(args.pretrained, args.device, stream=bool(getattr(args, "stream", False)), **kwargs)
-    factory.load_model()  # an unknown --pretrained name: one line, before anything is read or written
+    factory = PretrainedRestorer(args.pretrained, args.device, stream=bool(getattr(args, "stream", False)),
+                                 preset=getattr(args, "preset", None), **kwargs)
+    factory.load_model()  # an unknown --preset or --pretrained name: one line, before anything is read or written
     rank = int(os.environ.get("RANK", "0") or 0)
     try:
         summary = restore_dataset(args.recordings, args.depth, restorer=factory, workers=args.workers,

@@ -54,8 +54,8 @@ def restore_dataset(recordings: Union[str, Path, Seq[Sequence]], out: Union[str,
         recordings: a folder (see :func:`discover_recordings` for the layouts) or a list of sequences.
         out: the output folder; it must not hold the inputs.
         restorer: a picklable factory of per-sequence restorers (``.step(depth, rgb)``, ``.reset()``; see
-            :mod:`torch_depth_sr.recordings.restorers`); default ``PretrainedRestorer()`` (``DepthRestorer()`` frame
-            by frame).
+            :mod:`torch_depth_sr.recordings.restorers`); default ``PretrainedRestorer()`` (frame by frame, what
+            ``restore_depth`` runs without a model: the ``default`` tier to denoise).
         workers: ``> 1``: that many processes restore different sequences at once (per ``torchrun`` rank).
         resume: continue the run whose manifest ``out`` holds: finished frames are kept (not written again), the
             others restored. A sequence whose restorer carries state is replayed from its first frame so that every

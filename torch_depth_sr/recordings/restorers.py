@@ -15,7 +15,7 @@ The factory must be picklable for ``workers > 1`` (a module-level function or cl
 from __future__ import annotations
 
 import os
-from typing import TYPE_CHECKING, Any, Optional, Protocol
+from typing import TYPE_CHECKING, Any, Optional, Protocol, Union
 
 import torch
 
@@ -37,29 +37,38 @@ class FrameByFrame:
     """Each frame on its own with ``restore_depth(depth, rgb, model=model)``: no state between frames.
 
     Args:
-        model: a :class:`~torch_depth_sr.DepthRestorer`.
+        model: a :class:`~torch_depth_sr.DepthRestorer`, or None: what ``restore_depth`` runs without one, per frame
+            (:func:`~torch_depth_sr.model.default_model_for`), on ``device``.
+        device: where the default model runs (``model=None`` only; a model runs where it lives).
         **kwargs: passed to :func:`~torch_depth_sr.restore_depth` (``scale_factor``, ``fill``, ``noise_sigma``).
     """
 
     stateful = False
 
-    def __init__(self, model: "DepthRestorer", **kwargs: Any):
+    def __init__(self, model: Optional["DepthRestorer"], device: Union[str, torch.device] = "cpu", **kwargs: Any):
         self.model, self.kwargs = model, kwargs
-        p = next(iter(model.parameters()), None)
-        if p is None:
-            p = next(iter(model.buffers()), None)
-        self.device = p.device if p is not None else torch.device("cpu")
+        self.device = torch.device(device) if model is None else _device_of(model)
 
     def reset(self) -> None:
         pass
 
     def step(self, depth: Any, rgb: Optional[torch.Tensor]) -> Any:
-        from ..model import restore_depth
+        from ..model import default_model_for, restore_depth
 
         if rgb is not None:
             rgb = rgb[None].to(self.device)
+        model = self.model
+        if model is None:
+            model = default_model_for(depth, rgb, self.kwargs.get("scale_factor"), self.device)
         with torch.no_grad():
-            return restore_depth(depth, rgb, model=self.model, **self.kwargs)
+            return restore_depth(depth, rgb, model=model, **self.kwargs)
+
+
+def _device_of(model: "DepthRestorer") -> torch.device:
+    p = next(iter(model.parameters()), None)
+    if p is None:
+        p = next(iter(model.buffers()), None)
+    return p.device if p is not None else torch.device("cpu")
 
 
 class Streaming:
@@ -79,8 +88,7 @@ class Streaming:
         fill = kwargs.pop("fill", "all")
         self.stream = StreamRestorer(model, fill=fill)
         self.kwargs = kwargs
-        p = next(iter(model.parameters()), None)
-        self.device = p.device if p is not None else torch.device("cpu")
+        self.device = _device_of(self.stream.model)
 
     def reset(self) -> None:
         self.stream.reset()
@@ -93,46 +101,46 @@ class Streaming:
 
 
 class PretrainedRestorer:
-    """Factory of :class:`FrameByFrame` restorers running ``DepthRestorer.from_pretrained(name)`` (``None``: the
-    default ``DepthRestorer()``) on ``device`` — of :class:`Streaming` ones with ``stream=True``; picklable, so it
-    can travel to worker processes.
+    """Factory of :class:`FrameByFrame` restorers running ``DepthRestorer.from_pretrained(name)`` or
+    ``DepthRestorer.from_preset(preset)`` on ``device`` — of :class:`Streaming` ones with ``stream=True``;
+    picklable, so it can travel to worker processes. With neither name, frame by frame runs what ``restore_depth``
+    runs without a model (the ``default`` tier to denoise; :func:`~torch_depth_sr.model.default_model_for`), and a
+    stream :class:`~torch_depth_sr.StreamRestorer`'s default model.
 
     ``device="cuda"`` under ``torchrun`` means ``cuda:$LOCAL_RANK`` (one GPU per rank).
     """
 
-    def __init__(self, name: Optional[str] = None, device: str = "cpu", stream: bool = False, **kwargs: Any):
-        self.name, self.device, self.stream, self.kwargs = name, device, stream, kwargs
+    def __init__(self, name: Optional[str] = None, device: str = "cpu", stream: bool = False, *,
+                 preset: Optional[str] = None, **kwargs: Any):
+        self.name, self.preset, self.device, self.stream, self.kwargs = name, preset, device, stream, kwargs
         self._model = None
+        self._loaded = False
 
     def __getstate__(self) -> dict:
-        return {**self.__dict__, "_model": None}  # each process loads its own
+        return {**self.__dict__, "_model": None, "_loaded": False}  # each process loads its own
 
-    def load_model(self) -> "DepthRestorer":
-        """The model (loaded once per process); :class:`UsageError` for an unknown name."""
-        if self._model is None:
-            from ..model import DepthRestorer
+    def load_model(self) -> Optional["DepthRestorer"]:
+        """The named model (loaded once per process); without a name None frame by frame (each frame's default
+        model is chosen as it comes) and ``DepthRestorer()`` for a stream. :class:`UsageError` for an unknown name."""
+        if not self._loaded:
+            from ..model import DepthRestorer, load_named_model
 
-            if self.name is None:
-                model = DepthRestorer()
-            else:
-                try:
-                    model = DepthRestorer.from_pretrained(self.name)
-                except UsageError:
-                    raise
-                except ValueError as e:
-                    from ..errors import ModelFileError
-
-                    if isinstance(e, ModelFileError):
-                        raise
-                    raise UsageError(f"--pretrained {self.name!r}: {e}") from e
-            self._model = model.to(_rank_device(self.device))  # as `restore` runs it
+            device = _rank_device(self.device)
+            model = load_named_model(self.preset, self.name, device)  # as `restore` runs it
+            if model is None and self.stream:  # StreamRestorer's default model, on the device
+                model = DepthRestorer().to(device)
+            self._model, self._loaded = model, True
         return self._model
 
     def __call__(self) -> "FrameByFrame | Streaming":
-        return (Streaming if self.stream else FrameByFrame)(self.load_model(), **self.kwargs)
+        model = self.load_model()
+        if self.stream:
+            return Streaming(model, **self.kwargs)
+        return FrameByFrame(model, _rank_device(self.device), **self.kwargs)
 
     def __repr__(self) -> str:
-        return f"PretrainedRestorer({self.name!r}, device={self.device!r}, stream={self.stream})"
+        named = f"preset={self.preset!r}" if self.preset is not None else repr(self.name)
+        return f"PretrainedRestorer({named}, device={self.device!r}, stream={self.stream})"
 
 
 def _rank_device(device: str) -> torch.device:
