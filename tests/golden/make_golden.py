@@ -37,10 +37,11 @@ with the code of that stop, every other entry and the inputs kept byte for byte,
 
     OMP_NUM_THREADS=1 python tests/golden/make_golden.py --add-shipped denoise-default denoise-best
 
-**``shipped/denoise-default/*`` was made again, on purpose (issue 27, eleventh stop, 2026-12-05).** The ``default``
-tier's edge refiner was trained 1,500 steps more from its shipped weights (selection on validation MAE; docs/pretrained.md);
-the same ``--add-shipped denoise-default`` command rewrote its entries: the denoising output changed, the x2 / x4 area
-ones (where the refiner does not run) and every other entry stayed byte for byte.
+**``shipped/denoise-default/*`` and ``shipped/denoise-best/*`` were made again, on purpose (issue 27, eleventh stop,
+2026-12-05).** The ``default`` and ``best`` tiers' edge refiners were trained further from their shipped weights
+(selection on validation MAE; docs/pretrained.md); ``--add-shipped denoise-default denoise-best`` rewrote their
+entries: the denoising outputs changed, the x2 / x4 area ones (where the refiners do not run) and every other entry
+stayed byte for byte.
 
 Inputs (tiny, deterministic; stored so that the test does not depend on the scene generator): one synthetic scene
 (``make_scene(32, 40, seed=7)``), its colour image at 32x40 (the output size of every task); denoising: Gaussian noise
