@@ -1,3 +1,10 @@
+"""The default tier with its 16-channel refiner and with the 32-channel candidate, and kornia's 9x9 JBF, timed in turn
+in one process at 640x480 (2 threads, three rounds, the median; a synthetic frame with noise sigma 3). A scratch
+check over the two training runs' folders (runs/default-warm, runs/default-r32: the commands in docs/pretrained.md),
+made after the speed track read the candidate over 25x; it decided nothing.
+
+    python docs/measurements/issue27-tiers/eleventh-stop/time_r16_r32.py
+"""
 import time, torch, kornia
 from torch_depth_sr import DepthRestorer
 from torch_depth_sr.datasets.synthetic import make_scene
