@@ -54,6 +54,25 @@ def test_sided_median_matches_the_torch_path(dtype, radius, sigma_space):
     assert (share > 0.6).sum() > 0 and (share < 0.6).sum() > 0  # both kinds of pixel are compared
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("cutoff", [0.3, 0.55, 0.599])
+def test_the_cutoff_skips_only_pixels_whose_share_cannot_exceed_it(dtype, cutoff):
+    """snap_to_sides's shortcut: with a cutoff, a pixel reports (x_i, 0) only where its full share is at most the
+    cutoff; every other pixel reports the full median and share, bit for bit."""
+    from torch_depth_sr.edge_snap_kernel import sided_median_cpu
+    x, rgb, _, _ = _scene(dtype, h=40, w=50, seed=4)
+    spatial = _spatial(2, 1.5, dtype)
+    median, share = sided_median_cpu(x, rgb, 2, 0.235, spatial)
+    cut_median, cut_share = sided_median_cpu(x, rgb, 2, 0.235, spatial, cutoff)
+    skipped = (cut_share == 0) & (share > 0)
+    assert skipped.sum() > 0 and (~skipped).sum() > 0  # both kinds of pixel
+    assert bool((share[skipped] <= cutoff + 1e-6).all())
+    assert torch.equal(cut_median[skipped], x[skipped])
+    kept = ~skipped
+    assert torch.equal(cut_median[kept], median[kept]) and torch.equal(cut_share[kept], share[kept])
+    assert bool((share > cutoff + 1e-6).le(kept).all())  # no pixel that could move was skipped
+
+
 @pytest.mark.parametrize("active", [None, "pixels", "samples"])
 def test_snap_to_sides_matches_the_torch_path(active):
     x, rgb, _, _ = _scene(torch.float32)

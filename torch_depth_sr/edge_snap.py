@@ -29,6 +29,7 @@ from .window_max import max_filter, min_filter
 __all__ = ["refit_to_measurements", "sided_median", "snap_to_sides"]
 
 _PIXELS_PER_CHUNK = 16384  # edge pixels per gather in refit_to_measurements: 16384 × 121 × (8 + 3·8) bytes ≈ 63 MB
+_SHARE_MARGIN = 1e-3  # snap_to_sides: below its share by this, a pixel cannot move (see there)
 _ROWS_PER_CHUNK = 64  # bounds the (B, window, rows, W) stacks: 25 × 64 × 2000 × 8 bytes ≈ 26 MB at radius 2, float64
 
 
@@ -74,8 +75,13 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
     check_4d(x, "x", channels=1)
     check_4d(guide, "guide")
     check_same_hw(x, guide, "x", "guide")
-    r = int(radius)
-    offsets = [(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1)]
+    return _sided_median(x, guide, int(radius), sigma_color, sigma_space)
+
+
+def _sided_median(x: torch.Tensor, guide: torch.Tensor, r: int, sigma_color: float, sigma_space: Optional[float],
+                  cutoff: Optional[float] = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`sided_median`; with ``cutoff``, the numba kernel may report ``(x_i, 0)`` without sorting the window
+    of a pixel whose share cannot exceed ``cutoff`` (the torch path computes every pixel)."""
     spatial = None
     if sigma_space is not None:
         d = torch.arange(-r, r + 1, dtype=torch.float64, device=x.device)  # on the device: a CUDA graph captures it
@@ -83,7 +89,7 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
         spatial = (-squared / (2.0 * sigma_space ** 2)).to(x.dtype).exp().view(1, -1, 1, 1)
     kernel = host_kernel("edge_snap_kernel", "sided_median_cpu", x, guide)
     if kernel is not None:
-        return kernel(x, guide, r, sigma_color, spatial)
+        return kernel(x, guide, r, sigma_color, spatial, cutoff)
     return _sided_median_torch(x, guide, r, sigma_color, spatial)
 
 
@@ -146,8 +152,15 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
         out = x.clone()
         out[some] = snap_to_sides(x[some], g, rounds, radius, share, sigma_color, sigma_space)
         return out
+    check_4d(x, "x", channels=1)
+    check_4d(guide, "guide")
+    check_same_hw(x, guide, "x", "guide")
+    # a pixel moves only where its share exceeds ``share``: the kernel skips the sort wherever the weight on each
+    # side of x_i is at most ``share − _SHARE_MARGIN`` of the total (most pixels off an edge; the same result: the
+    # margin is far above the round-off between its window-order sums and the share's sorted-order ones)
+    cutoff = max(0.0, float(share) - _SHARE_MARGIN)
     for _ in range(int(rounds)):
-        median, side_share = sided_median(x, guide, radius, sigma_color, sigma_space)
+        median, side_share = _sided_median(x, guide, int(radius), sigma_color, sigma_space, cutoff)
         move = side_share > share
         if active is not None:
             move = move & active

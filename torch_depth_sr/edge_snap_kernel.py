@@ -110,10 +110,15 @@ def _colour_planes(t0, t1, g, r, sigma, planes):
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _sided(t0, t1, x, g, planes, spatial, r, sigma, median, share):
+def _sided(t0, t1, x, g, planes, spatial, r, sigma, cutoff, median, share):
     """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch: ``x`` (B, H, W), ``g`` (1 or B, C, H, W) and
     its colour weights ``planes`` (:func:`_colour_planes`) → ``median``, ``share`` (B, H, W). ``spatial`` holds a
-    weight per window offset (``dy`` outer, ``dx`` inner), or nothing for a flat window."""
+    weight per window offset (``dy`` outer, ``dx`` inner), or nothing for a flat window.
+
+    ``cutoff >= 0``: a pixel whose weight strictly below ``x_i`` and strictly above it are both at most ``cutoff``
+    times the total is not sorted and reports ``(x_i, 0)``: its share (one of those two over the total) cannot exceed
+    ``cutoff``, whichever side the median lies on. Sums in window order here, in sorted order for the share, so the
+    caller leaves a margin of round-off between ``cutoff`` and the share it tests."""
     b, h, w = x.shape
     d = 2 * r + 1
     window_vals = np.empty(d * d, x.dtype)  # the window's voting entries in window order, then sorted
@@ -149,6 +154,21 @@ def _sided(t0, t1, x, g, planes, spatial, r, sigma, median, share):
                     window_vals[m] = x[n, yy, xx]
                     window_wts[m] = wt
                     m += 1
+        if cutoff >= 0.0:
+            whole = 0.0
+            below = 0.0
+            above = 0.0
+            for q in range(m):
+                wq = np.float64(window_wts[q])
+                whole += wq
+                if window_vals[q] < xi:
+                    below += wq
+                elif window_vals[q] > xi:
+                    above += wq
+            if max(below, above) <= cutoff * whole:
+                median[n, row, col] = xi
+                share[n, row, col] = 0.0
+                continue
         _sort(window_vals, window_wts, m, vals, wts)
         k, total = _median(vals, wts, cum, m)
         if k >= 0:
@@ -212,9 +232,10 @@ def _np_dtype(x: torch.Tensor):
 
 
 def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_color: float,
-                     spatial: Optional[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+                     spatial: Optional[torch.Tensor], cutoff: Optional[float] = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(median, share)``, each (B,1,H,W), of CPU float tensors ``x`` (B,1,H,W) and ``guide`` (1 or B, C, H, W),
-    without gradient; ``spatial``: None or the ``(2 radius + 1)²`` offset weights in ``x``'s dtype."""
+    without gradient; ``spatial``: None or the ``(2 radius + 1)²`` offset weights in ``x``'s dtype. ``cutoff``: the
+    pixels whose share cannot exceed it report ``(x_i, 0)`` unsorted (:func:`_sided`); None computes every pixel."""
     b, _, h, w = x.shape
     dt = _np_dtype(x)
     xn = as_numpy(x, (b, h, w), dt)
@@ -230,7 +251,7 @@ def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_co
         g = gn if gn.shape[0] == 1 else gn[rows]
         run_range(_colour_planes, h, g, r, dt(sigma_color), planes)
         run_range(_sided, (rows.stop - rows.start) * h * w, xn[rows], g, planes, sp, r, dt(sigma_color),
-                  median[rows], share[rows])
+                  -1.0 if cutoff is None else float(cutoff), median[rows], share[rows])
     return torch.from_numpy(median).view(b, 1, h, w), torch.from_numpy(share).view(b, 1, h, w)
 
 
