@@ -47,7 +47,19 @@ def test_run_speed_in_process_writes_json_and_table(tmp_path, capsys):
     assert methods == ["full", "jbf", "kornia-jbf9"]  # the kornia reference is always added
     ref = [r for r in data["results"] if r["method"] == "kornia-jbf9"][0]
     assert ref["ratio_to_kornia_jbf9"] == pytest.approx(1.0)
-    assert "x kornia9" in capsys.readouterr().out
+    by = {r["method"]: r for r in data["results"]}  # full is the second reference: its own ratio is 1
+    assert by["full"]["ratio_to_full"] == pytest.approx(1.0)
+    assert by["jbf"]["ratio_to_full"] == pytest.approx(by["jbf"]["seconds"] / by["full"]["seconds"])
+    printed = capsys.readouterr().out
+    assert "x kornia9" in printed and "x full" in printed
+
+
+def test_run_speed_without_full_has_no_ratio_to_it(tmp_path):
+    out = tmp_path / "speed.json"
+    args = types.SimpleNamespace(json=str(out), device="cpu", sizes="24x32", batches="1", repeats=1,
+                                 isolate=False, methods=["jbf"])
+    assert run_speed(args) == 0
+    assert all(r["ratio_to_full"] is None for r in json.loads(out.read_text())["results"])
 
 
 def test_run_speed_subprocess_one_method(tmp_path):

@@ -10,7 +10,8 @@ Times, side by side in one run and on the same synthetic inputs
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
 * ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
   reference every ratio is taken against (``ratio = method time / kornia-jbf9 time``, same size and
-  batch, same run).
+  batch, same run). Where ``full`` ran too, each row also gives its time over ``full``'s (``x full``): a ratio
+  between two computations of the same kind, which moves less from run to run than the one to kornia's filter.
 
 Each measurement is one warm-up call (a stream's: its cold first frame and ``STREAM_WARM_STEPS`` steps) then the
 median of ``repeats`` timed calls. A stream row then times ``repeats`` rounds of steps and cold frames of the same
@@ -405,6 +406,10 @@ def run_speed(args: argparse.Namespace) -> int:
                       flush=True)
     ref = {(r["height"], r["width"], r["batch"]): r["seconds"] for r in results
            if r["method"] == "kornia-jbf9" and "seconds" in r}
+    # the frozen full model as a second reference: its time moves with the machine as the tiers' do, while kornia's
+    # filter is mostly memory traffic (about 100 MB of temporaries a call) and swings 2x between runs
+    full = {(r["height"], r["width"], r["batch"]): r["seconds"] for r in results
+            if r["method"] == "full" and "seconds" in r}
     table = []
     for r in results:
         if "seconds" not in r:
@@ -417,9 +422,12 @@ def run_speed(args: argparse.Namespace) -> int:
             continue
         k = ref.get((r["height"], r["width"], r["batch"]))
         r["ratio_to_kornia_jbf9"] = r["seconds"] / k if k else None
+        f = full.get((r["height"], r["width"], r["batch"]))
+        r["ratio_to_full"] = r["seconds"] / f if f else None
         r["ms_per_frame"] = 1000.0 * r["seconds"] / r["batch"]
         t = {"method": r["method"], "size": f"{r['width']}x{r['height']}", "batch": r["batch"],
              "seconds": r["seconds"], "ms/frame": r["ms_per_frame"], "x kornia9": r["ratio_to_kornia_jbf9"],
+             "x full": r["ratio_to_full"],
              "peak MB": r.get("peak_mb"), "load": r["loadavg"][0] if r.get("loadavg") else None}
         st = r.get("stages")
         if st:
@@ -430,7 +438,7 @@ def run_speed(args: argparse.Namespace) -> int:
         if r.get("paired"):
             t["step/cold"] = r["paired"]["ratio"]
         table.append(t)
-    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "peak MB", "bm", "singular", "nonlocal", "cg",
+    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "x full", "peak MB", "bm", "singular", "nonlocal", "cg",
             "edges", "refiner", "rest",
             "cg it/layer", "step/cold", "load"]
     meta = _metadata(device)
@@ -448,7 +456,8 @@ def run_speed(args: argparse.Namespace) -> int:
     except ImportError:  # pragma: no cover - both are dependencies
         pass
     _print_table(table, cols, f"track speed on {device}, {meta['threads']} thread(s); median of {repeats} "
-                 f"after a warm-up; 'x kornia9' = time / kornia joint_bilateral_blur 9x9 (same size, batch, run)")
+                 f"after a warm-up; 'x kornia9' = time / kornia joint_bilateral_blur 9x9, 'x full' = time / the "
+                 f"frozen full model (same size, batch, run; full where it ran)")
     if skipped:
         print("skipped (too slow here): " + ", ".join(skipped))
     if getattr(args, "json", None):
