@@ -3,15 +3,11 @@
 # (docs/measurements/issue28-stream/step_vs_cold.py), then the DataLoader example. From the repository root after
 # `make install`:
 #   bash docs/measurements/issue27-tiers/alternate_commits.sh 5e4dfbe 480x640 5 3
-# The earlier commit is checked out as a git worktree in a temporary folder; its numba kernels compile once there.
+# The earlier commit is checked out as a git worktree in a temporary folder (before_worktree.sh); its numba kernels
+# compile once there.
 set -euo pipefail
 before=$1; size=${2:-480x640}; rounds=${3:-5}; repeats=${4:-3}
-root=$(mktemp -d)/before
-git worktree add -q "$root" "$before"
-trap 'git worktree remove --force "$root"' EXIT
-here=docs/measurements/issue27-tiers
-py=.venv/bin/python
-$py $here/run_at.py "$root" --warmup
+source docs/measurements/issue27-tiers/before_worktree.sh  # $root, $here, $py
 steps=(docs/measurements/issue28-stream/step_vs_cold.py --sizes "$size" --rounds "$rounds")
 loader=(examples/restore_in_dataloader.py --workers 2 --frames 16 --size 240 320 --tier fast)
 for i in $(seq "$repeats"); do

@@ -5,12 +5,7 @@
 #   bash docs/measurements/issue27-tiers/twelfth-stop/snap_before_after.sh b0908e6 4
 set -euo pipefail
 before=$1; repeats=${2:-4}
-root=$(mktemp -d)/before
-git worktree add -q "$root" "$before"
-trap 'git worktree remove --force "$root"' EXIT
-here=docs/measurements/issue27-tiers
-py=.venv/bin/python
-$py $here/run_at.py "$root" --warmup
+source docs/measurements/issue27-tiers/before_worktree.sh  # $root, $here, $py
 echo "edge steps before:"; $py $here/run_at.py "$root" $here/time_edge_steps.py | tail -4
 echo "edge steps after:"; $py $here/time_edge_steps.py | tail -4
 loader=(examples/restore_in_dataloader.py --workers 2 --frames 16 --size 240 320 --tier fast)
