@@ -58,9 +58,12 @@ def test_first_frame_is_restore_depth_bit_for_bit():
     assert not bool(r.static.any()) and r.info["stream"]["frame"] == 0
 
 
-def test_default_model_and_the_per_frame_model_is_untouched():
+def test_default_model_is_the_tier_the_settings_were_fitted_for_and_the_per_frame_model_is_untouched():
     s = StreamRestorer()
-    assert s.model.config.stream == StreamConfig() and DepthRestorer().config.stream is None
+    fast = DepthRestorer.from_preset("fast")
+    assert s.settings == fast.config.stream and s.settings != StreamConfig()  # fast's fitted settings (layers 1)
+    assert all(torch.equal(a, b) for a, b in zip(s.model.state_dict().values(), fast.state_dict().values()))
+    assert DepthRestorer().config.stream is None
     m = small_model()
     before = repr(m)
     StreamRestorer(m)

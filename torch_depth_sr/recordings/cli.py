@@ -58,8 +58,9 @@ def add_recordings_arguments(parser: argparse.ArgumentParser) -> None:
                         "runs that must give identical bits need the same value")
     g.add_argument("--stream", action="store_true",
                    help="restore each sequence as a stream (torch_depth_sr.StreamRestorer: a frame helped by the "
-                        "frames before it - less flicker, holes held from a confident past, cheaper frames); "
-                        "default: every frame on its own, as restore does. See docs/stream.md")
+                        "frames before it - less flicker, holes held from a confident past, cheaper frames), with the "
+                        "fast tier unless --preset or --pretrained names another; default: every frame on its own, as "
+                        "restore does. See docs/stream.md")
     g.add_argument("--max-time-difference", type=_seconds, default=None, metavar="SECONDS",
                    help="TUM depth.txt + rgb.txt: largest time between a depth frame and its colour frame "
                         f"(default {TUM_MAX_DIFFERENCE})")

@@ -121,14 +121,16 @@ class PretrainedRestorer:
 
     def load_model(self) -> Optional["DepthRestorer"]:
         """The named model (loaded once per process); without a name None frame by frame (each frame's default
-        model is chosen as it comes) and ``DepthRestorer()`` for a stream. :class:`UsageError` for an unknown name."""
+        model is chosen as it comes) and :func:`~torch_depth_sr.stream.default_stream_model` for a stream. :class:`UsageError` for an unknown name."""
         if not self._loaded:
-            from ..model import DepthRestorer, load_named_model
+            from ..model import load_named_model
 
             device = _rank_device(self.device)
             model = load_named_model(self.preset, self.name, device)  # as `restore` runs it
             if model is None and self.stream:  # StreamRestorer's default model, on the device
-                model = DepthRestorer().to(device)
+                from ..stream import default_stream_model
+
+                model = default_stream_model().to(device)
             self._model, self._loaded = model, True
         return self._model
 

@@ -47,7 +47,8 @@ from .change import change_test, local_spread
 from .crop_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
 
-__all__ = ["StreamRestorer", "StreamResult", "StreamState", "TemporalPrior", "with_stream"]
+__all__ = ["DEFAULT_STREAM_PRESET", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
+           "default_stream_model", "with_stream"]
 
 
 SPREAD_MEMORY = 0.9  # the decay per frame of the remembered frame-to-frame change (the change test's noise unit)
@@ -302,13 +303,25 @@ class _Frame:
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed)
 
 
+DEFAULT_STREAM_PRESET = "fast"
+"""The tier a stream runs without a model: its settings (``layers`` 1 in its config) were fitted for it, and every
+figure of ``docs/stream.md`` (the ``stream`` track's default ``--model``) is of it."""
+
+
+def default_stream_model() -> DepthRestorer:
+    """The model of ``StreamRestorer()`` and of a stream with no model named (``torch-depth-sr restore --stream``):
+    ``DepthRestorer.from_preset(DEFAULT_STREAM_PRESET)``, on the CPU."""
+    return DepthRestorer.from_preset(DEFAULT_STREAM_PRESET)
+
+
 class StreamRestorer(nn.Module):
     """A depth video restored frame by frame, each frame helped by the previous one (module docstring).
 
     Args:
         model: the :class:`~torch_depth_sr.DepthRestorer` to run (``from_pretrained``, ``from_preset``, trained or
-            frozen); default ``DepthRestorer()``, the frozen configuration's defaults (preset ``"full"``; the stream's
-            settings were fitted for the ``fast`` tier, ``docs/stream.md``). The stream shares
+            frozen); default :func:`default_stream_model`, the ``fast`` tier: the stream's settings were fitted for
+            it and ``docs/stream.md`` measures it (a stream of another model runs with settings not fitted for it,
+            and a step of the 8-layer tiers costs what a cold frame does). The stream shares
             its parameters (:func:`with_stream`): training the stream trains ``model``.
         settings: the stream's settings (:class:`~torch_depth_sr.config.StreamConfig`, a dict of changes, or None:
             ``model.config.stream``, else the defaults).
@@ -338,7 +351,7 @@ class StreamRestorer(nn.Module):
     def __init__(self, model: Optional[DepthRestorer] = None, settings: Union[StreamConfig, dict, None] = None, *,
                  fill: str = "all", noise_sigma: NoiseSigma = None):
         super().__init__()
-        model = DepthRestorer() if model is None else model
+        model = default_stream_model() if model is None else model
         _check_fill(fill)
         self.settings = _stream_settings(model, settings)
         self.model = with_stream(model, self.settings)
