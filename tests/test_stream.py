@@ -440,6 +440,7 @@ def test_recordings_factory_streams_and_replays(tmp_path):
     factory = PretrainedRestorer(None, stream=True)
     restorer = factory()
     assert restorer.stateful
+    assert restorer.stream.settings == DepthRestorer.from_preset("fast").config.stream  # no name: StreamRestorer()'s
     factory._model = small_model()  # a quick model for the test
     summary = restore_dataset(root, tmp_path / "out", restorer=factory, progress=False)
     assert summary.ok and summary.written == 3
