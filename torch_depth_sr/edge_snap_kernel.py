@@ -232,7 +232,8 @@ def _np_dtype(x: torch.Tensor):
 
 
 def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_color: float,
-                     spatial: Optional[torch.Tensor], cutoff: Optional[float] = None) -> tuple[torch.Tensor, torch.Tensor]:
+                     spatial: Optional[torch.Tensor],
+                     cutoff: Optional[float] = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(median, share)``, each (B,1,H,W), of CPU float tensors ``x`` (B,1,H,W) and ``guide`` (1 or B, C, H, W),
     without gradient; ``spatial``: None or the ``(2 radius + 1)²`` offset weights in ``x``'s dtype. ``cutoff``: the
     pixels whose share cannot exceed it report ``(x_i, 0)`` unsorted (:func:`_sided`); None computes every pixel."""

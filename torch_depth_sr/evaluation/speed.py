@@ -438,9 +438,8 @@ def run_speed(args: argparse.Namespace) -> int:
         if r.get("paired"):
             t["step/cold"] = r["paired"]["ratio"]
         table.append(t)
-    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "x full", "peak MB", "bm", "singular", "nonlocal", "cg",
-            "edges", "refiner", "rest",
-            "cg it/layer", "step/cold", "load"]
+    cols = ["method", "size", "batch", "seconds", "ms/frame", "x kornia9", "x full", "peak MB", "bm", "singular",
+            "nonlocal", "cg", "edges", "refiner", "rest", "cg it/layer", "step/cold", "load"]
     meta = _metadata(device)
     meta.update(track="speed", threads=threads or torch.get_num_threads(), cpu_count=os.cpu_count(),
                 sizes=[list(s) for s in sizes], batches=list(batches), repeats=repeats, isolated=isolate,

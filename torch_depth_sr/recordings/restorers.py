@@ -121,7 +121,8 @@ class PretrainedRestorer:
 
     def load_model(self) -> Optional["DepthRestorer"]:
         """The named model (loaded once per process); without a name None frame by frame (each frame's default
-        model is chosen as it comes) and :func:`~torch_depth_sr.stream.default_stream_model` for a stream. :class:`UsageError` for an unknown name."""
+        model is chosen as it comes) and :func:`~torch_depth_sr.stream.default_stream_model` for a stream.
+        :class:`UsageError` for an unknown name."""
         if not self._loaded:
             from ..model import load_named_model
 
