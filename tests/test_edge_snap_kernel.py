@@ -87,6 +87,28 @@ def test_snap_to_sides_matches_the_torch_path(active):
     assert (snapped != x).sum() > 10 and torch.equal(snapped, reference)
 
 
+@pytest.mark.parametrize("active", [None, "pixels", "samples"])
+@pytest.mark.parametrize("edge", [10.0, 16.0])
+def test_snap_near_edges_matches_the_torch_path_and_moves_only_there(active, edge):
+    """``edge``: the kernel sorts only the windows near a depth edge (weights computed where read, not as planes);
+    the torch path computes every window and keeps the moves near an edge. Same result, and no pixel away from an
+    edge moves (with every pixel allowed, some do)."""
+    x, rgb, _, _ = _scene(torch.float32, h=40, w=50, seed=2)
+    if active == "pixels":
+        active = torch.rand(x.shape, generator=torch.Generator().manual_seed(3)) > 0.3
+    elif active == "samples":
+        active = torch.tensor([False, True]).view(2, 1, 1, 1)
+    snapped = snap_to_sides(x, rgb, rounds=1, active=active, edge=edge)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+        reference = snap_to_sides(x, rgb, rounds=1, active=active, edge=edge)
+    assert (snapped != x).sum() > 5 and torch.equal(snapped, reference)
+    near, _ = _near_edge(x, edge, 2)
+    everywhere = snap_to_sides(x, rgb, rounds=1, active=active)
+    assert bool((snapped != x).le(near).all()) and ((everywhere != x) & ~near).sum() > 0
+    assert torch.equal(snapped[near], everywhere[near])  # near an edge, the same moves as without ``edge``
+
+
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("radius", [1, 3, 5])
 def test_refit_matches_the_torch_path(dtype, radius):

@@ -79,9 +79,11 @@ def sided_median(x: torch.Tensor, guide: torch.Tensor, radius: int = 2, sigma_co
 
 
 def _sided_median(x: torch.Tensor, guide: torch.Tensor, r: int, sigma_color: float, sigma_space: Optional[float],
-                  cutoff: Optional[float] = None) -> tuple[torch.Tensor, torch.Tensor]:
+                  cutoff: Optional[float] = None,
+                  pixels: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`sided_median`; with ``cutoff``, the numba kernel may report ``(x_i, 0)`` without sorting the window
-    of a pixel whose share cannot exceed ``cutoff`` (the torch path computes every pixel)."""
+    of a pixel whose share cannot exceed ``cutoff``, and with ``pixels`` (sorted flat indices into (B, H, W)) it
+    computes only those (the torch path computes every pixel)."""
     spatial = None
     if sigma_space is not None:
         d = torch.arange(-r, r + 1, dtype=torch.float64, device=x.device)  # on the device: a CUDA graph captures it
@@ -89,7 +91,7 @@ def _sided_median(x: torch.Tensor, guide: torch.Tensor, r: int, sigma_color: flo
         spatial = (-squared / (2.0 * sigma_space ** 2)).to(x.dtype).exp().view(1, -1, 1, 1)
     kernel = host_kernel("edge_snap_kernel", "sided_median_cpu", x, guide)
     if kernel is not None:
-        return kernel(x, guide, r, sigma_color, spatial, cutoff)
+        return kernel(x, guide, r, sigma_color, spatial, cutoff, pixels)
     return _sided_median_torch(x, guide, r, sigma_color, spatial)
 
 
@@ -132,11 +134,13 @@ def _sided_median_torch(x: torch.Tensor, guide: torch.Tensor, r: int, sigma_colo
 
 def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius: int = 2, share: float = 0.6,
                   sigma_color: float = 0.235, sigma_space: Optional[float] = None,
-                  active: Optional[torch.Tensor] = None) -> torch.Tensor:
+                  active: Optional[torch.Tensor] = None, edge: Optional[float] = None) -> torch.Tensor:
     """``rounds`` passes of: ``x_i ← median_i`` where the :func:`sided_median` share exceeds ``share``.
 
     ``active`` (B,1,1,1) or (B,1,H,W) bool: where snapping may act (everywhere when None), e.g. the samples the
-    singular test found outliers in. Returns a new tensor; ``x`` is not modified.
+    singular test found outliers in. ``edge``: when given, snapping acts only where the ``5×5`` range of ``x``
+    exceeds it (near a depth edge, in the units of ``x``, as :func:`refit_to_measurements`), and on the CPU only
+    those windows are sorted; None: everywhere. Returns a new tensor; ``x`` is not modified.
 
     Examples:
         >>> x = torch.tensor([[[[0., 0., 5., 10., 10.]]]]).expand(1, 1, 3, 5).contiguous()  # a blend at 5
@@ -150,7 +154,7 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
     if some is not None:  # only the active samples' windows (each sample's result depends on its own only)
         g = guide if guide.shape[0] == 1 else guide[some]
         out = x.clone()
-        out[some] = snap_to_sides(x[some], g, rounds, radius, share, sigma_color, sigma_space)
+        out[some] = snap_to_sides(x[some], g, rounds, radius, share, sigma_color, sigma_space, edge=edge)
         return out
     check_4d(x, "x", channels=1)
     check_4d(guide, "guide")
@@ -159,11 +163,20 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
     # side of x_i is at most ``share − _SHARE_MARGIN`` of the total (most pixels off an edge; the same result: the
     # margin is far above the round-off between its window-order sums and the share's sorted-order ones)
     cutoff = max(0.0, float(share) - _SHARE_MARGIN)
+    b, _, h, w = x.shape
     for _ in range(int(rounds)):
-        median, side_share = _sided_median(x, guide, int(radius), sigma_color, sigma_space, cutoff)
+        allowed = active
+        if edge is not None:  # near a depth edge only; on the CPU the other windows are not sorted at all
+            near = (max_filter(x, 5) - min_filter(x, 5)) > edge
+            allowed = near if active is None else near & active
+        pixels = None
+        if edge is not None and host_path(x.device):
+            where = allowed.expand(b, 1, h, w).nonzero()
+            pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3]
+        median, side_share = _sided_median(x, guide, int(radius), sigma_color, sigma_space, cutoff, pixels)
         move = side_share > share
-        if active is not None:
-            move = move & active
+        if allowed is not None:
+            move = move & allowed
         x = torch.where(move, median, x)
     return x
 

@@ -110,10 +110,12 @@ def _colour_planes(t0, t1, g, r, sigma, planes):
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _sided(t0, t1, x, g, planes, spatial, r, sigma, cutoff, median, share):
-    """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch: ``x`` (B, H, W), ``g`` (1 or B, C, H, W) and
-    its colour weights ``planes`` (:func:`_colour_planes`) → ``median``, ``share`` (B, H, W). ``spatial`` holds a
-    weight per window offset (``dy`` outer, ``dx`` inner), or nothing for a flat window.
+def _sided(t0, t1, pixels, x, g, planes, spatial, r, sigma, cutoff, median, share):
+    """``sided_median`` at pixels ``[t0, t1)`` of the flattened batch, or at ``pixels[t0:t1]`` (flat indices into
+    (B, H, W)) when ``pixels`` is not empty: ``x`` (B, H, W), ``g`` (1 or B, C, H, W) and its colour weights
+    ``planes`` (:func:`_colour_planes`; with no planes, ``(1, 0, 1, 1)``, the weights are computed as they are read)
+    → ``median``, ``share`` (B, H, W). ``spatial`` holds a weight per window offset (``dy`` outer, ``dx`` inner), or
+    nothing for a flat window.
 
     ``cutoff >= 0``: a pixel whose weight strictly below ``x_i`` and strictly above it are both at most ``cutoff``
     times the total is not sorted and reports ``(x_i, 0)``: its share (one of those two over the total) cannot exceed
@@ -127,9 +129,12 @@ def _sided(t0, t1, x, g, planes, spatial, r, sigma, cutoff, median, share):
     wts = np.empty(d * d, x.dtype)
     cum = np.empty(d * d, x.dtype)
     tiny = np.finfo(x.dtype).tiny
+    listed = pixels.shape[0] > 0
+    direct = planes.shape[1] == 0  # no planes: each weight computed where it is read (a few listed pixels)
     for t in range(t0, t1):
-        n = t // (h * w)
-        i = t - n * h * w
+        p = pixels[t] if listed else t
+        n = p // (h * w)
+        i = p - n * h * w
         row = i // w
         col = i - row * w
         gn = n if planes.shape[0] > 1 else 0
@@ -142,8 +147,8 @@ def _sided(t0, t1, x, g, planes, spatial, r, sigma, cutoff, median, share):
             for dx in range(-rx, rx + 1):
                 yy = row + dy
                 xx = col + dx
-                if dy == 0 and dx == 0:  # 1, or NaN for a NaN colour, as the torch path
-                    wt = _colour_weight(g, gn, row, col, row, col, sigma)
+                if direct or (dy == 0 and dx == 0):  # the centre: 1, or NaN for a NaN colour, as the torch path
+                    wt = _colour_weight(g, gn, row, col, yy, xx, sigma)
                 elif dy > 0 or (dy == 0 and dx > 0):
                     wt = planes[gn, _plane(r, dy, dx), row, col]
                 else:
@@ -232,26 +237,46 @@ def _np_dtype(x: torch.Tensor):
 
 
 def sided_median_cpu(x: torch.Tensor, guide: torch.Tensor, radius: int, sigma_color: float,
-                     spatial: Optional[torch.Tensor],
-                     cutoff: Optional[float] = None) -> tuple[torch.Tensor, torch.Tensor]:
+                     spatial: Optional[torch.Tensor], cutoff: Optional[float] = None,
+                     pixels: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(median, share)``, each (B,1,H,W), of CPU float tensors ``x`` (B,1,H,W) and ``guide`` (1 or B, C, H, W),
     without gradient; ``spatial``: None or the ``(2 radius + 1)²`` offset weights in ``x``'s dtype. ``cutoff``: the
-    pixels whose share cannot exceed it report ``(x_i, 0)`` unsorted (:func:`_sided`); None computes every pixel."""
+    pixels whose share cannot exceed it report ``(x_i, 0)`` unsorted (:func:`_sided`); None computes every pixel.
+    ``pixels``: flat indices into (B, H, W), sorted; only those are computed, the others report ``(x_i, 0)``; their
+    colour weights are computed where they are read, not as planes (the same weights but for the ulp by which a
+    vectorised ``exp`` may differ)."""
     b, _, h, w = x.shape
     dt = _np_dtype(x)
     xn = as_numpy(x, (b, h, w), dt)
     gn = as_numpy(guide.to(x.dtype), guide.shape, dt)
     sp = as_numpy(spatial, (-1,), dt) if spatial is not None else np.zeros(0, dt)
-    median = np.empty((b, h, w), dt)
-    share = np.empty((b, h, w), dt)
+    if pixels is None:
+        median = np.empty((b, h, w), dt)
+        share = np.empty((b, h, w), dt)
+        listed = np.zeros(0, np.int64)
+    else:
+        median = xn.copy()
+        share = np.zeros((b, h, w), dt)
+        listed = as_numpy(pixels, (-1,), np.int64)
     r = int(radius)
-    # one guide's weight planes at a time (2r(r+1) planes of H×W: 72 MB at 1376×1088, r = 2), whatever the batch
-    planes = np.empty((1, 2 * r * (r + 1), h, w), dt)
+    # one guide's weight planes at a time (2r(r+1) planes of H×W: 72 MB at 1376×1088, r = 2), whatever the batch;
+    # none for listed pixels (near depth edges, a few percent): there each weight is computed where it is read
+    planes = np.empty((1, 2 * r * (r + 1), h, w), dt) if pixels is None else np.empty((1, 0, 1, 1), dt)
     samples = [slice(0, b)] if gn.shape[0] == 1 else [slice(n, n + 1) for n in range(b)]
     for rows in samples:
         g = gn if gn.shape[0] == 1 else gn[rows]
-        run_range(_colour_planes, h, g, r, dt(sigma_color), planes)
-        run_range(_sided, (rows.stop - rows.start) * h * w, xn[rows], g, planes, sp, r, dt(sigma_color),
+        if listed.shape[0]:  # this sample's listed pixels, as flat indices into its own (1, H, W)
+            lo, hi = np.searchsorted(listed, [rows.start * h * w, rows.stop * h * w])
+            if lo == hi:
+                continue
+            todo, count = listed[lo:hi] - rows.start * h * w, hi - lo
+        elif pixels is not None:  # an empty list: nothing to compute
+            break
+        else:
+            todo, count = listed, (rows.stop - rows.start) * h * w
+        if pixels is None:
+            run_range(_colour_planes, h, g, r, dt(sigma_color), planes)
+        run_range(_sided, count, todo, xn[rows], g, planes, sp, r, dt(sigma_color),
                   -1.0 if cutoff is None else float(cutoff), median[rows], share[rows])
     return torch.from_numpy(median).view(b, 1, h, w), torch.from_numpy(share).view(b, 1, h, w)
 

@@ -41,7 +41,8 @@ class EdgeSnapStep(nn.Module):
         c = self.settings
         with stage(obs.log.timings, "snap", x.device):
             return snap_to_sides(x, obs.rgb, rounds=c.rounds, radius=c.radius, share=c.share,
-                                 sigma_color=c.sigma_color, sigma_space=c.sigma_space, active=~state.clean)
+                                 sigma_color=c.sigma_color, sigma_space=c.sigma_space, active=~state.clean,
+                                 edge=c.edge)
 
     def extra_repr(self) -> str:
         return ", ".join(f"{k}={v}" for k, v in self.settings.to_dict().items())

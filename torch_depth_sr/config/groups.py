@@ -331,17 +331,19 @@ class EdgeSnap(Group):
     """Edge snapping of the output on samples with outliers (:func:`~torch_depth_sr.edge_snap.snap_to_sides`):
     ``rounds`` passes of "x ← the colour-weighted median of its (2 radius + 1)² window where the weight on the
     median's side exceeds ``share``" (colour weights exp(−‖Δc‖₁/``sigma_color``), times a Gaussian of
-    ``sigma_space`` px; None = a flat window)."""
+    ``sigma_space`` px; None = a flat window), where the 5×5 range of x exceeds ``edge`` noise σ (None: at every
+    pixel)."""
 
     rounds: int = 1
     radius: int = 2
     share: float = 0.6
     sigma_color: float = 0.235
     sigma_space: Optional[float] = None
+    edge: Optional[float] = None
     _NAME: ClassVar[str] = "edge_snap"
     _CHECKS: ClassVar[dict] = {"rounds": integer(1), "radius": integer(1),
                                "share": real(0.5, 1.0, lo_open=False, hi_open=True), "sigma_color": positive,
-                               "sigma_space": optional(positive)}
+                               "sigma_space": optional(positive), "edge": optional(non_negative)}
 
 
 @dataclass(frozen=True)

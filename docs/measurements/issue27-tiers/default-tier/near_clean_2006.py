@@ -44,7 +44,7 @@ def main() -> None:
                 ratio[a].append(q)
                 worse[a] += q >= 1
         for a in models:
-            print(f"sigma {sig} {a[-30:]:30s} worse on {worse[a]}/11, mean ratio {np.mean(ratio[a]):.3f}, "
+            print(f"sigma {sig} {a[-30:]:30s} worse on {worse[a]}/11, mean ratio {np.mean(ratio[a]):.4f}, "
                   f"max {max(ratio[a]):.3f}", flush=True)
 
 
