@@ -2,6 +2,7 @@
 version-1 flat names converted the way a version-1 file of those settings converts."""
 import pytest
 
+from torch_depth_sr import DepthRestorer
 from torch_depth_sr.config import RestorerConfig, apply_overrides, from_version1, preset_config
 from torch_depth_sr.config.overrides import flat_changes
 from torch_depth_sr.config.version1 import _SETS, FLAT_FIELDS, VERSION1_DEFAULTS, to_version1
@@ -84,11 +85,15 @@ def test_flat_fields_on_other_bases_as_version1(base):
 
 
 def test_version1_view_round_trips_the_presets():
-    """Everything but the stream group, which version 1 did not have (the fast tier carries one)."""
+    """Everything but the stream group and the edge snap's ``edge``, which version 1 did not have (the stream's model
+    carries one, the fast tier the other)."""
     for name in ("full", "default", "fast", "paper", "tv", "tv+nl"):
         c = preset_config(name)
-        assert from_version1(to_version1(c)) == c.replace(stream=None), name
-    assert preset_config("fast").stream is not None  # the case above covers one
+        after_version1 = {"stream": None} if c.edge_snap is None else {"stream": None, "edge_snap": {"edge": None}}
+        assert from_version1(to_version1(c)) == c.replace(**after_version1), name
+    assert preset_config("fast").edge_snap.edge is not None  # the case above covers one
+    c = DepthRestorer.from_pretrained("denoise-fast").config
+    assert c.stream is not None and from_version1(to_version1(c)) == c.replace(stream=None)
 
 
 def test_flat_changes_names_only_what_changes():

@@ -13,7 +13,7 @@ import torch
 from torch_depth_sr import DepthRestorer, StreamRestorer, restore_depth
 from torch_depth_sr.config import RestorerConfig, StreamConfig
 from torch_depth_sr.errors import ShapeError
-from torch_depth_sr.stream import with_stream
+from torch_depth_sr.stream import DEFAULT_STREAM_MODEL, default_stream_model, with_stream
 from torch_depth_sr.terms import TemporalPriorTerm
 
 H, W = 40, 48
@@ -58,10 +58,10 @@ def test_first_frame_is_restore_depth_bit_for_bit():
     assert not bool(r.static.any()) and r.info["stream"]["frame"] == 0
 
 
-def test_default_model_is_the_tier_the_settings_were_fitted_for_and_the_per_frame_model_is_untouched():
+def test_default_model_is_the_model_the_settings_were_fitted_for_and_the_per_frame_model_is_untouched():
     s = StreamRestorer()
-    fast = DepthRestorer.from_preset("fast")
-    assert s.settings == fast.config.stream and s.settings != StreamConfig()  # fast's fitted settings (layers 1)
+    fast = DepthRestorer.from_pretrained(DEFAULT_STREAM_MODEL)  # denoise-fast, the fast tier until 2026-12-05
+    assert s.settings == fast.config.stream and s.settings != StreamConfig()  # its fitted settings (layers 1)
     assert all(torch.equal(a, b) for a, b in zip(s.model.state_dict().values(), fast.state_dict().values()))
     assert DepthRestorer().config.stream is None
     m = small_model()
@@ -348,7 +348,7 @@ def test_a_frame_with_a_previous_one_runs_the_first_layers_setting():
     assert calls == [0, 1, 2]
     with pytest.raises(Exception, match="stream.layers"):
         RestorerConfig(stream={"layers": 0})
-    assert DepthRestorer.from_preset("fast").config.stream.layers == 1  # the fast tier ships with it
+    assert DepthRestorer.from_pretrained(DEFAULT_STREAM_MODEL).config.stream.layers == 1  # the stream's model has it
 
 
 def test_later_layers_on_crops_equal_the_whole_frame_where_everything_changed():
@@ -440,7 +440,7 @@ def test_recordings_factory_streams_and_replays(tmp_path):
     factory = PretrainedRestorer(None, stream=True)
     restorer = factory()
     assert restorer.stateful
-    assert restorer.stream.settings == DepthRestorer.from_preset("fast").config.stream  # no name: StreamRestorer()'s
+    assert restorer.stream.settings == default_stream_model().config.stream  # no name: StreamRestorer()'s
     factory._model = small_model()  # a quick model for the test
     summary = restore_dataset(root, tmp_path / "out", restorer=factory, progress=False)
     assert summary.ok and summary.written == 3

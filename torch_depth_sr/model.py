@@ -309,7 +309,8 @@ class DepthRestorer(nn.Module):
         ``'denoise'`` (denoise and fill, tracks ``paper`` + ``sensor``), ``'denoise-guided'`` (the same with the
         guidance network's per-pixel thresholds), ``'denoise-refined'`` (that model plus the edge refiner),
         ``'denoise-best'`` (the same with the refiner fine-tuned on near-clean noise as well: the best denoiser, the
-        ``best`` speed tier), ``'denoise-default'`` and ``'denoise-fast'`` (the other speed tiers), ``'upsample'``
+        ``best`` speed tier), ``'denoise-default'`` and ``'denoise-fast2'`` (the other speed tiers),
+        ``'denoise-fast'`` (the ``fast`` tier until 2026-12-05, the stream's model), ``'upsample'``
         (guided upsampling ×4–×16 with the edge refiner, bicubic-downsampled input),
         ``'upsample-x4-refined'`` (×4 only), ``'upsample-area'`` (noisy area-downsampled input, ×2–×16),
         ``'upsample-x4'`` (superseded). Trained on the Middlebury 2006 scenes and synthetic scenes only.

@@ -50,6 +50,18 @@ crops came out 3–4 times worse); ``OMP_NUM_THREADS=1 python tests/golden/make_
 denoise-default`` rewrote its entries; its denoising depth and confidence were kept from that run, its x2 / x4 area entries
 (which the singular test does not touch: the same values with either tolerance) and every other entry as they were.
 
+**``named/fast/*`` were regenerated a third time, and ``shipped/denoise-fast/*`` added, on purpose (issue 27,
+fourteenth stop, 2026-12-05).** The ``fast`` tier is now ``denoise-fast2`` (2 trained layers, snapping near depth
+edges only; chosen by docs/measurements/issue27-tiers/fourteenth-stop/rule-lighter-fast.md); the 3-layer
+``denoise-fast`` stays shipped as the stream's model and keeps its numbers under its own key. Made by
+
+    OMP_NUM_THREADS=1 python tests/golden/make_golden.py --add-shipped denoise-fast
+    OMP_NUM_THREADS=1 python tests/golden/make_golden.py --fast-only
+
+every other entry and the inputs kept byte for byte. The new ``shipped/denoise-fast/*`` entries are bit for bit what
+the code before this stop (3be6d3d) gives for ``from_preset("fast")``; the old ``named/fast/*`` entries differed from
+that by at most 4.6e-5 (float rounding of earlier stops' kernels, within the test's tolerance).
+
 Inputs (tiny, deterministic; stored so that the test does not depend on the scene generator): one synthetic scene
 (``make_scene(32, 40, seed=7)``), its colour image at 32x40 (the output size of every task); denoising: Gaussian noise
 sigma = 3, two holes, five impulses and five flying pixels; guided upsampling x2 and x4: the ground truth area-averaged

@@ -35,15 +35,16 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 # Named configurations that carry trained parameters: ``DepthRestorer.from_preset(name)`` loads the shipped model
 # ``from_pretrained(TRAINED_PRESETS[name])`` (issue 27's speed tiers, docs/speed.md "Speed tiers"):
-# "fast": 3 layers trained end to end, one block-matching pass on x⁰ (7×7 window, 10 matches), 2 singular-test
-#   rounds, a 7×7 x⁰ filter, then a small trained edge refiner (8 channels, 2 layers); about a fifteenth of the
-#   default's time at 640×480;
+# "fast": 2 layers trained end to end, one block-matching pass on x⁰ (7×7 window, 10 matches), 2 singular-test
+#   rounds, a 7×7 x⁰ filter, edge snapping near depth edges only, then a trained edge refiner (16 channels, 3
+#   layers); about a tenth of the frozen "full"'s time at 640×480 ("denoise-fast2"; "denoise-fast", 3 layers,
+#   until 2026-12-05, is the stream's model);
 # "default": what restore_depth(depth, rgb) runs to denoise: the guidance CNN's per-pixel thresholds of
 #   "denoise-guided" with a 7×7 search window, then a 16-channel edge refiner; more accurate than "full" and about a
 #   third of its time;
 # "best": the best shipped denoiser: "denoise-refined" (the guidance CNN's per-pixel thresholds and the edge refiner)
 #   with its refiner fine-tuned on near-clean noise as well, so that a near-clean map does not come out worse.
-TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast", "default": "denoise-default", "best": "denoise-best"}
+TRAINED_PRESETS: dict[str, str] = {"fast": "denoise-fast2", "default": "denoise-default", "best": "denoise-best"}
 
 # the speed tiers, fastest first: what each name is, for users choosing by time (docs/speed.md)
 TIERS = ("fast", "default", "best")
@@ -58,7 +59,7 @@ def preset_config(name: str, **overrides: Any) -> RestorerConfig:
         >>> preset_config("paper").block_matching.block_size
         5
         >>> preset_config("fast").num_layers
-        3
+        2
     """
     if name in TRAINED_PRESETS:
         from .restorer import load_config_file

@@ -137,7 +137,7 @@ def to_version1(config: Any) -> dict:
     :data:`FLAT_FIELDS`, a group that is off written as its version-1 sentinel (``snap_rounds=0``, ...) and the
     other fields of such a group at their version-1 defaults. :func:`~torch_depth_sr.config.from_version1` of it gives ``config`` back
     wherever version 1 can say it (not: edge refit and edge snap with different colour sigmas, settings of a group
-    that is off, the stream group, which came after version 1)."""
+    that is off, the stream group and the edge snap's ``edge``, which came after version 1)."""
     c, v = config, dict(VERSION1_DEFAULTS)
     v.update(num_layers=c.num_layers, degradation=c.degradation,
              use_nonlocal=c.uses("nonlocal"), use_outliers=c.uses("outliers"), use_singular=c.uses("singular"))

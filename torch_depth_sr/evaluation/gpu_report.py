@@ -1,10 +1,11 @@
 """``python -m torch_depth_sr.evaluation.gpu_report``: time every speed tier on a CUDA GPU in one command.
 
 ``python -m torch_depth_sr.evaluation.gpu_report [--sizes 480x640 1088x1376] [--batch 1 8] [--out DIR]`` times, per
-size (height x width) and batch, the tiers ``fast``, ``default`` and ``best``, a stream step of the fast and the
-default tier (``stream-fast``, ``stream``: :class:`~torch_depth_sr.StreamRestorer` on the scene of the tiers' frames
-with new noise every step, after its cold first frame and ``speed.STREAM_WARM_STEPS`` steps; ``step_vs_cold`` is the
-step's time over its tier's row) and kornia's ``joint_bilateral_blur`` 9x9 as the reference: warm-up calls, then the
+size (height x width) and batch, the tiers ``fast``, ``default`` and ``best``, the stream's own model
+``denoise-fast`` (the fast tier until 2026-12-05) on a cold frame, a stream step of that model and of the default
+tier (``stream-fast``, ``stream``: :class:`~torch_depth_sr.StreamRestorer` on the scene of the tiers' frames with new
+noise every step, after its cold first frame and ``speed.STREAM_WARM_STEPS`` steps; ``step_vs_cold`` is the step's
+time over its model's cold row) and kornia's ``joint_bilateral_blur`` 9x9 as the reference: warm-up calls, then the
 median ms per frame of ``--repeats`` calls timed with CUDA events, the peak memory
 (``torch.cuda.max_memory_allocated`` over what was allocated before), and for each tier an attempt to capture its
 forward as a CUDA graph (static inputs) with the replay's ms per frame, or the error text and where it arose.
@@ -140,7 +141,7 @@ def profile(device: str, height: int, width: int, path: Path) -> dict:
 
 
 TIERS = ("fast", "default", "best")
-STREAMS = {"stream-fast": "fast", "stream": "default"}  # a stream step and the tier whose model it runs
+STREAMS = {"stream-fast": "denoise-fast", "stream": "default"}  # a stream step and the model it runs (cold row)
 COLUMNS = ["method", "size", "batch", "ms_per_frame", "step_vs_cold", "peak_mb", "graph", "graph_ms_per_frame",
            "graph_max_abs_diff"]
 
@@ -230,6 +231,8 @@ def measure_all(sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeat
     filter."""
     rows = []
     models = {tier: DepthRestorer.from_preset(tier).to("cuda").eval() for tier in TIERS}
+    models.update({name: DepthRestorer.from_pretrained(name).to("cuda").eval()  # the stream models that are no tier
+                   for name in STREAMS.values() if name not in models})
     for h, w in sizes:
         for b in batches:
             depth, rgb, gt = speed.make_inputs(h, w, b)
@@ -252,7 +255,7 @@ def measure_all(sizes: Sequence[tuple[int, int]], batches: Sequence[int], repeat
                 except Exception as exc:  # a method that fails on the GPU is a result to report; the others go on
                     first = (str(exc).strip().splitlines() or [""])[0]
                     row["error"] = f"{type(exc).__name__}: {first}"[:300]
-                if name in TIERS and "error" not in row:
+                if name in models and "error" not in row:
                     cold[name] = row["ms_per_frame"]
                 if name in STREAMS and "error" not in row and STREAMS[name] in cold:
                     row["step_vs_cold"] = row["ms_per_frame"] / cold[STREAMS[name]]

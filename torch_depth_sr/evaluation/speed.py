@@ -64,7 +64,8 @@ METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fas
 # the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best,
 # and "full", the frozen configuration's defaults (the default tier until 2026-12-04)
 MODEL_PRESETS = {"full": "full", "fast": "fast", "default": "default", "best": "best", "full-fast": "fast"}
-# "stream", "stream-fast": a step of a StreamRestorer of the frozen full / the fast model on the inputs' static scene
+# "stream", "stream-fast": a step of a StreamRestorer of the frozen full / of the stream's own model (``denoise-fast``,
+# the fast tier until 2026-12-05: stream.DEFAULT_STREAM_MODEL) on the inputs' static scene
 # with new noise (σ = 5) and the same holes every call (the warm-up calls are the stream's first, cold, frame and
 # STREAM_WARM_STEPS steps; the timed calls are later steps; the rmse is the last step's). A stream runs for thousands
 # of frames, and the timed steps are its steady state: its first steps allocate the state and new buffers (on a
@@ -77,7 +78,7 @@ STREAM_WARM_STEPS = 8
 # second of each timed (row["paired"]: the medians and the median of the rounds' ratios, the figure of issue 28's
 # step target). Three calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine
 # in two runs; timing the first call after the other kind made a 1376x1088 step 15 % slower than back to back.
-STREAM_COLD = {"stream": "full", "stream-fast": "fast"}
+STREAM_MODELS = {"stream": "full", "stream-fast": "denoise-fast"}  # a preset or a shipped model (from_pretrained)
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
 # "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240, the fast tier) once and reports its
@@ -118,25 +119,36 @@ def make_inputs(height: int, width: int, batch: int, seed: int = 0, sigma: float
     return torch.stack(ys), torch.stack(rgbs), torch.stack(gts)
 
 
+def _named_model(name: str):
+    """``DepthRestorer.from_preset(name)``, or ``from_pretrained(name)`` for a shipped model that is no preset."""
+    from ..config import PRESETS, TRAINED_PRESETS
+    from ..model import DepthRestorer
+
+    if name in PRESETS or name in TRAINED_PRESETS:
+        return DepthRestorer.from_preset(name)
+    return DepthRestorer.from_pretrained(name)
+
+
+def _model_runner(model):
+    """``(depth, rgb) -> (out, details)`` of ``model``, its stages timed."""
+
+    def run(y, rgb):
+        r = model.restore_with_details(y, rgb, timings=True)
+        return r.depth, r.info
+
+    return run
+
+
 def _make_runner(method: str, device: str):
     """A function ``(depth, rgb) -> (out, details or None)`` for ``method``."""
     from .methods import DICTIONARY_PARAMS, JBF_PARAMS
 
     if method in MODEL_PRESETS:
-        from ..model import DepthRestorer
-
-        model = DepthRestorer.from_preset(MODEL_PRESETS[method]).to(device)
-
-        def run(y, rgb):
-            r = model.restore_with_details(y, rgb, timings=True)
-            return r.depth, r.info
-
-        return run
-    if method in ("stream", "stream-fast"):
-        from ..model import DepthRestorer
+        return _model_runner(_named_model(MODEL_PRESETS[method]).to(device))
+    if method in STREAM_MODELS:
         from ..stream import StreamRestorer
 
-        stream = StreamRestorer(DepthRestorer.from_preset("full" if method == "stream" else "fast").to(device))
+        stream = StreamRestorer(_named_model(STREAM_MODELS[method]).to(device))
         g = torch.Generator(device="cpu").manual_seed(1)
         scene: dict = {}
 
@@ -283,7 +295,7 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
             infos.append(info)
         # the stream's own peak, before the paired cold frames
         peak = torch.cuda.max_memory_allocated() if cuda else _proc_status("VmHWM")
-        paired = _paired_rounds(method, run, y, rgb, device, n) if method in STREAM_COLD and n else None
+        paired = _paired_rounds(method, run, y, rgb, device, n) if method in STREAM_MODELS and n else None
     row = {"method": method, "height": height, "width": width, "batch": batch, "repeats": len(times),
            "seconds": statistics.median(times) if times else warm, "seconds_all": times, "warmup_seconds": warm}
     if warm_steps:
@@ -314,9 +326,9 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
 
 
 def _paired_rounds(method: str, step, y: torch.Tensor, rgb: torch.Tensor, device: str, rounds: int) -> dict:
-    """``rounds`` rounds of two stream steps then two cold frames of the same model (``STREAM_COLD``), the second of
-    each timed: ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
-    cold = _make_runner(STREAM_COLD[method], device)
+    """``rounds`` rounds of two stream steps then two cold frames of the same model (``STREAM_MODELS``), the second
+    of each timed: ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
+    cold = _model_runner(_named_model(STREAM_MODELS[method]).to(device))
     cold(y, rgb)  # its warm-up
     _sync(device)
     steps, colds = [], []

@@ -357,7 +357,9 @@ def run_stream_track(args: argparse.Namespace) -> int:
     if set(sets) - {"synthetic", "real"}:
         raise UsageError(f"--sets for track stream: synthetic and/or real; got {sets}")
     device = getattr(args, "device", "cpu") or "cpu"
-    model_name = getattr(args, "model", None) or "fast"
+    from ..stream import DEFAULT_STREAM_MODEL
+
+    model_name = getattr(args, "model", None) or DEFAULT_STREAM_MODEL
     model = _model(model_name, device) if {"frame", "stream", "rs-temporal+frame"} & set(methods) else None
     if any(m.startswith("rs-") for m in methods):
         from ..baselines.realsense import realsense_available, INSTALL_HINT

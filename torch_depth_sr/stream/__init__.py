@@ -4,8 +4,8 @@ the config group ``stream`` (:class:`~torch_depth_sr.config.StreamConfig`); the 
 :class:`~torch_depth_sr.terms.TemporalPriorTerm`. Results: ``docs/stream.md``."""
 from .change import ChangeTest, change_test
 from .matching import StreamMatcher
-from .restorer import (DEFAULT_STREAM_PRESET, StreamRestorer, StreamResult, StreamState, TemporalPrior,
+from .restorer import (DEFAULT_STREAM_MODEL, StreamRestorer, StreamResult, StreamState, TemporalPrior,
                        default_stream_model, with_stream)
 
-__all__ = ["DEFAULT_STREAM_PRESET", "ChangeTest", "StreamMatcher", "StreamRestorer", "StreamResult", "StreamState",
+__all__ = ["DEFAULT_STREAM_MODEL", "ChangeTest", "StreamMatcher", "StreamRestorer", "StreamResult", "StreamState",
            "TemporalPrior", "change_test", "default_stream_model", "with_stream"]

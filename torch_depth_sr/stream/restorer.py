@@ -47,7 +47,7 @@ from .change import change_test, local_spread
 from .crop_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
 
-__all__ = ["DEFAULT_STREAM_PRESET", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
+__all__ = ["DEFAULT_STREAM_MODEL", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
            "default_stream_model", "with_stream"]
 
 
@@ -303,15 +303,16 @@ class _Frame:
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed)
 
 
-DEFAULT_STREAM_PRESET = "fast"
-"""The tier a stream runs without a model: its settings (``layers`` 1 in its config) were fitted for it, and every
-figure of ``docs/stream.md`` (the ``stream`` track's default ``--model``) is of it."""
+DEFAULT_STREAM_MODEL = "denoise-fast"
+"""The shipped model a stream runs without a model: the 3-layer ``denoise-fast`` (the ``fast`` tier until
+2026-12-05). Its stream settings (``layers`` 1 in its config) were fitted for it, and every figure of
+``docs/stream.md`` (the ``stream`` track's default ``--model``) is of it."""
 
 
 def default_stream_model() -> DepthRestorer:
     """The model of ``StreamRestorer()`` and of a stream with no model named (``torch-depth-sr restore --stream``):
-    ``DepthRestorer.from_preset(DEFAULT_STREAM_PRESET)``, on the CPU."""
-    return DepthRestorer.from_preset(DEFAULT_STREAM_PRESET)
+    ``DepthRestorer.from_pretrained(DEFAULT_STREAM_MODEL)``, on the CPU."""
+    return DepthRestorer.from_pretrained(DEFAULT_STREAM_MODEL)
 
 
 class StreamRestorer(nn.Module):
@@ -319,8 +320,8 @@ class StreamRestorer(nn.Module):
 
     Args:
         model: the :class:`~torch_depth_sr.DepthRestorer` to run (``from_pretrained``, ``from_preset``, trained or
-            frozen); default :func:`default_stream_model`, the ``fast`` tier: the stream's settings were fitted for
-            it and ``docs/stream.md`` measures it (a stream of another model runs with settings not fitted for it,
+            frozen); default :func:`default_stream_model`, ``denoise-fast`` (the ``fast`` tier until 2026-12-05):
+            the stream's settings were fitted for it and ``docs/stream.md`` measures it (a stream of another model runs with settings not fitted for it,
             and a step of the 8-layer tiers costs what a cold frame does). The stream shares
             its parameters (:func:`with_stream`): training the stream trains ``model``.
         settings: the stream's settings (:class:`~torch_depth_sr.config.StreamConfig`, a dict of changes, or None:
