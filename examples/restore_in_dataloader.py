@@ -3,7 +3,8 @@
     python examples/restore_in_dataloader.py --workers 2 --frames 16 --size 240 320 --tier fast
 
 ``--tier`` picks the speed tier by name (``fast``, ``default`` or ``best``; ``DepthRestorer.from_preset``,
-docs/speed.md). The main process loads the compiled kernels (numba) before the workers start
+docs/speed.md); ``--pretrained NAME`` a shipped model instead (``DepthRestorer.from_pretrained``, e.g. ``denoise-fast``,
+the fast tier until 2026-12-05). The main process loads the compiled kernels (numba) before the workers start
 (``torch_depth_sr.warmup``, float32: each kernel once on a tiny input; it compiles them on a fresh install): the
 workers, forked from it, start with them instead of each loading them again.
 
@@ -19,6 +20,7 @@ import time
 import torch
 from torch.utils.data import DataLoader
 
+from torch_depth_sr import DepthRestorer
 from torch_depth_sr.datasets.synthetic import SyntheticScenes
 from torch_depth_sr.degradations import SensorDegradation
 from torch_depth_sr.transforms import Compose, RestoreDepth
@@ -39,10 +41,14 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=16)
     p.add_argument("--size", type=int, nargs=2, default=(240, 320))
     p.add_argument("--tier", default="fast", help="fast, default or best (or any DepthRestorer.from_preset name)")
+    p.add_argument("--pretrained", default=None, help="a shipped model (from_pretrained) instead of the tier")
     p.add_argument("--layers", type=int, default=None, help="override the tier's number of layers")
     a = p.parse_args()
     overrides = {} if a.layers is None else {"num_layers": a.layers}
-    restore = RestoreDepth(preset=a.tier, keep_input="raw_depth", **overrides)
+    if a.pretrained is not None:
+        restore = RestoreDepth(DepthRestorer.from_pretrained(a.pretrained, **overrides), keep_input="raw_depth")
+    else:
+        restore = RestoreDepth(preset=a.tier, keep_input="raw_depth", **overrides)
     ds = SyntheticScenes(n=a.frames, size=tuple(a.size), transform=Compose([Degrade(), restore]))
     t0 = time.perf_counter()  # the time from here includes the warm-up and the workers' start-up
     if a.workers > 0:  # load every kernel in the main process, so that the workers, forked from it, inherit them
@@ -61,7 +67,8 @@ def main() -> None:
     w = max(1, a.workers)
     steady = (f"steady {(n - w) / (arrived[-1] - arrived[w - 1]):.2f} once every worker delivered"
               if n > w and arrived[-1] > arrived[w - 1] else "too few frames for a steady rate")
-    print(f"{n} frames {a.size[0]}x{a.size[1]}, tier {a.tier}, {a.workers} workers: {n / (end - t0):.2f} frames/s "
+    model = f"model {a.pretrained}" if a.pretrained is not None else f"tier {a.tier}"
+    print(f"{n} frames {a.size[0]}x{a.size[1]}, {model}, {a.workers} workers: {n / (end - t0):.2f} frames/s "
           f"(includes start-up; {steady}); RMSE input (measured px) "
           f"{se_in / n:.2f} -> restored {se_out / n:.2f}")
 
