@@ -216,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="track gdsr: at most this many images per set, evenly spaced (a quick subset of RGBDD)")
     b.add_argument("--model", default=None,
                    help="track stream: the model of the methods frame and stream, a preset or a shipped name "
-                        "(default fast)")
+                        "(default denoise-fast, the stream's model)")
     b.add_argument("--frames", type=_positive_int, default=None, help="track stream: frames per synthetic sequence "
                    "(default 30)")
     b.add_argument("--size", default=None, help="track stream: HxW of the synthetic sequences (default 120x160)")

@@ -59,7 +59,8 @@ def add_recordings_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--stream", action="store_true",
                    help="restore each sequence as a stream (torch_depth_sr.StreamRestorer: a frame helped by the "
                         "frames before it - less flicker, holes held from a confident past, cheaper frames), with the "
-                        "fast tier unless --preset or --pretrained names another; default: every frame on its own, as "
+                        "stream's model denoise-fast unless --preset or --pretrained names another; default: every "
+                        "frame on its own, as "
                         "restore does. See docs/stream.md")
     g.add_argument("--max-time-difference", type=_seconds, default=None, metavar="SECONDS",
                    help="TUM depth.txt + rgb.txt: largest time between a depth frame and its colour frame "
