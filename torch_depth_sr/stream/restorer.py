@@ -321,9 +321,10 @@ class StreamRestorer(nn.Module):
     Args:
         model: the :class:`~torch_depth_sr.DepthRestorer` to run (``from_pretrained``, ``from_preset``, trained or
             frozen); default :func:`default_stream_model`, ``denoise-fast`` (the ``fast`` tier until 2026-12-05):
-            the stream's settings were fitted for it and ``docs/stream.md`` measures it (a stream of another model runs with settings not fitted for it,
-            and a step of the 8-layer tiers costs what a cold frame does). The stream shares
-            its parameters (:func:`with_stream`): training the stream trains ``model``.
+            the stream's settings were fitted for it and ``docs/stream.md`` measures it (a stream of another model,
+            the ``fast`` tier's ``denoise-fast2`` too, runs with settings not fitted for it, and a step of the 8-layer
+            tiers costs what a cold frame does). The stream shares its parameters (:func:`with_stream`): training the
+            stream trains ``model``.
         settings: the stream's settings (:class:`~torch_depth_sr.config.StreamConfig`, a dict of changes, or None:
             ``model.config.stream``, else the defaults).
         fill: ``"all"`` or ``"trusted"`` as in :func:`~torch_depth_sr.restore_depth`; with ``"trusted"`` a hole

@@ -43,4 +43,5 @@ keys=list(acc[first].keys())
 print("variant".ljust(12)+"".join(k[:8].rjust(9) for k in keys)+"  ratio to "+first+" (median, quartiles)")
 for name in V:
   q=st.quantiles(ratios[name],n=4)
-  print(name.ljust(12)+"".join(f"{st.median(acc[name].get(k,[0]))*1000:9.1f}" for k in keys)+f"  {st.median(ratios[name]):.3f} ({q[0]:.3f}-{q[2]:.3f})")
+  stages = "".join(f"{st.median(acc[name].get(k, [0])) * 1000:9.1f}" for k in keys)
+  print(name.ljust(12) + stages + f"  {st.median(ratios[name]):.3f} ({q[0]:.3f}-{q[2]:.3f})")
