@@ -165,20 +165,29 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
     cutoff = max(0.0, float(share) - _SHARE_MARGIN)
     b, _, h, w = x.shape
     for _ in range(int(rounds)):
-        allowed = active
+        allowed, pixels = active, None
         if edge is not None:  # near a depth edge only; on the CPU the other windows are not sorted at all
-            near = (max_filter(x, 5) - min_filter(x, 5)) > edge
+            near = _near_edge(x, edge)
             allowed = near if active is None else near & active
-        pixels = None
-        if edge is not None and host_path(x.device):
-            where = allowed.expand(b, 1, h, w).nonzero()
-            pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3]
+            if host_path(x.device):
+                pixels = _flat_pixels(allowed.expand(b, 1, h, w), h, w)
         median, side_share = _sided_median(x, guide, int(radius), sigma_color, sigma_space, cutoff, pixels)
         move = side_share > share
         if allowed is not None:
             move = move & allowed
         x = torch.where(move, median, x)
     return x
+
+
+def _near_edge(x: torch.Tensor, edge: float) -> torch.Tensor:
+    """Where the ``5×5`` range of ``x`` exceeds ``edge``: a depth edge is near (both edge steps' test)."""
+    return (max_filter(x, 5) - min_filter(x, 5)) > edge
+
+
+def _flat_pixels(where: torch.Tensor, h: int, w: int) -> torch.Tensor:
+    """Flat indices into (B, H, W) of the pixels ``where`` is true, sorted ((B, 1 or C, H, W) bool, expanded)."""
+    at = where.nonzero()
+    return at[:, 0] * h * w + at[:, 2] * w + at[:, 3]
 
 
 def _no_sample_active(active: Optional[torch.Tensor], x: torch.Tensor) -> bool:
@@ -225,17 +234,16 @@ def refit_to_measurements(x: torch.Tensor, y: torch.Tensor, observed: torch.Tens
         return x
     b, _, h, w = x.shape
     r = int(radius)
-    near_edge = (max_filter(x, 5) - min_filter(x, 5)) > edge
+    near_edge = _near_edge(x, edge)
     if active is not None:
         near_edge = near_edge & active
     cpu = host_path(x.device)
-    # the pixels near an edge, (N, 4): sample, channel, row, column; on the CPU a gather over 2–5 % of the pixels
-    # instead of a sort over all. Other devices take every pixel (finding them would make the host wait for the
-    # device) and keep the result near an edge only: the same values.
-    where = near_edge.nonzero() if cpu else None
-    if cpu and where.shape[0] == 0:
+    # the pixels near an edge: on the CPU a gather over 2–5 % of the pixels instead of a sort over all. Other devices
+    # take every pixel (finding them would make the host wait for the device) and keep the result near an edge only:
+    # the same values.
+    pixels = _flat_pixels(near_edge, h, w) if cpu else None
+    if cpu and pixels.shape[0] == 0:
         return x
-    pixels = where[:, 0] * h * w + where[:, 2] * w + where[:, 3] if cpu else None
     kernel = host_kernel("edge_snap_kernel", "refit_cpu", x, y, guide)
     if kernel is not None:
         return kernel(x, y, observed, guide, pixels, r, band, sigma_color)

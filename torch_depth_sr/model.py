@@ -47,6 +47,7 @@ __all__ = [
     "restore_depth",
     "default_model",
     "default_model_for",
+    "named_model",
     "NoiseSigma",
 ]
 
@@ -527,6 +528,16 @@ def default_model_for(depth: Any, rgb: Any = None, scale_factor: Optional[int] =
     numpy_image = not isinstance(rgb, torch.Tensor) and len(rgb.shape) == 3 and rgb.shape[-1] == 3
     size = tuple(rgb.shape[:2]) if numpy_image else tuple(rgb.shape[-2:])
     return default_model(size != tuple(depth.shape[-2:]) or (scale_factor or 1) > 1, device)
+
+
+def named_model(name: str) -> DepthRestorer:
+    """The model a name gives, whichever kind it is: ``DepthRestorer.from_preset(name)`` for a named configuration or
+    speed tier, else ``DepthRestorer.from_pretrained(name)`` (a shipped model)."""
+    from .config import PRESETS
+
+    if name in PRESETS or name in TRAINED_PRESETS:
+        return DepthRestorer.from_preset(name)
+    return DepthRestorer.from_pretrained(name)
 
 
 def load_named_model(preset: Optional[str] = None, pretrained: Optional[str] = None,

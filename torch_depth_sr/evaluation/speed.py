@@ -46,6 +46,7 @@ from typing import Optional
 import torch
 
 from ..errors import UsageError
+from ..model import named_model
 
 __all__ = [
     "METHODS",
@@ -119,16 +120,6 @@ def make_inputs(height: int, width: int, batch: int, seed: int = 0, sigma: float
     return torch.stack(ys), torch.stack(rgbs), torch.stack(gts)
 
 
-def _named_model(name: str):
-    """``DepthRestorer.from_preset(name)``, or ``from_pretrained(name)`` for a shipped model that is no preset."""
-    from ..config import PRESETS, TRAINED_PRESETS
-    from ..model import DepthRestorer
-
-    if name in PRESETS or name in TRAINED_PRESETS:
-        return DepthRestorer.from_preset(name)
-    return DepthRestorer.from_pretrained(name)
-
-
 def _model_runner(model):
     """``(depth, rgb) -> (out, details)`` of ``model``, its stages timed."""
 
@@ -144,11 +135,11 @@ def _make_runner(method: str, device: str):
     from .methods import DICTIONARY_PARAMS, JBF_PARAMS
 
     if method in MODEL_PRESETS:
-        return _model_runner(_named_model(MODEL_PRESETS[method]).to(device))
+        return _model_runner(named_model(MODEL_PRESETS[method]).to(device))
     if method in STREAM_MODELS:
         from ..stream import StreamRestorer
 
-        stream = StreamRestorer(_named_model(STREAM_MODELS[method]).to(device))
+        stream = StreamRestorer(named_model(STREAM_MODELS[method]).to(device))
         g = torch.Generator(device="cpu").manual_seed(1)
         scene: dict = {}
 
@@ -328,7 +319,7 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
 def _paired_rounds(method: str, step, y: torch.Tensor, rgb: torch.Tensor, device: str, rounds: int) -> dict:
     """``rounds`` rounds of two stream steps then two cold frames of the same model (``STREAM_MODELS``), the second
     of each timed: ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
-    cold = _model_runner(_named_model(STREAM_MODELS[method]).to(device))
+    cold = _model_runner(named_model(STREAM_MODELS[method]).to(device))
     cold(y, rgb)  # its warm-up
     _sync(device)
     steps, colds = [], []

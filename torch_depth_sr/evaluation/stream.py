@@ -67,12 +67,9 @@ RS_TUNED = dict(alpha=0.05, delta=100.0, persistence=8)
 
 # ---- methods -----------------------------------------------------------------------------------------------------
 def _model(name: str, device: str):
-    from ..config import PRESETS, TRAINED_PRESETS
-    from ..model import DepthRestorer
+    from ..model import named_model
 
-    if name in PRESETS or name in TRAINED_PRESETS:  # the speed tiers fast / best are named presets too
-        return DepthRestorer.from_preset(name).to(device)
-    return DepthRestorer.from_pretrained(name).to(device)
+    return named_model(name).to(device)
 
 
 class _Method:

@@ -60,8 +60,7 @@ def add_recordings_arguments(parser: argparse.ArgumentParser) -> None:
                    help="restore each sequence as a stream (torch_depth_sr.StreamRestorer: a frame helped by the "
                         "frames before it - less flicker, holes held from a confident past, cheaper frames), with the "
                         "stream's model denoise-fast unless --preset or --pretrained names another; default: every "
-                        "frame on its own, as "
-                        "restore does. See docs/stream.md")
+                        "frame on its own, as restore does. See docs/stream.md")
     g.add_argument("--max-time-difference", type=_seconds, default=None, metavar="SECONDS",
                    help="TUM depth.txt + rgb.txt: largest time between a depth frame and its colour frame "
                         f"(default {TUM_MAX_DIFFERENCE})")
