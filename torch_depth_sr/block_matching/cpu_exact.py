@@ -157,6 +157,8 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
     ring = np.zeros((nbuf, bs, u_len), dtype=xp.dtype)  # depth (, trust product, colour) squared differences
     col = np.zeros((nbuf, u_len), dtype=xp.dtype)
     dd = np.zeros(big_w, dtype=xp.dtype)
+    trust_sum = np.zeros(big_w, dtype=xp.dtype)  # a row's block sums of the trust product and colour
+    colour_sum = np.zeros(big_w, dtype=xp.dtype)
     k = topd.shape[2]
     # the band's lists rank-major, (rows, k, W): rank m of a row is contiguous, so an offer to a row is vector loops
     rd = np.empty((h1 - h0, k, big_w), dtype=xp.dtype)
@@ -231,28 +233,36 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
                     rbs = ring[bb, s2]
                     for u in range(u_len):
                         cs[u] += rbs[u]
-            c0 = col[0]
-            for j in range(j0, j1):
-                dd[j] = c0[j]
+            # the row's distances in loops that start at 0: numba wraps a negative index around, and LLVM vectorises
+            # a loop only where it can tell the index is not negative (from j0 it could not: half the time)
+            nj = j1 - j0
+            ddv = dd[j0:j1]
+            c0 = col[0, j0:j1 + bs - 1]
+            for j in range(nj):
+                ddv[j] = c0[j]
             for q in range(1, bs):
-                for j in range(j0, j1):
-                    dd[j] += c0[j + q]
+                for j in range(nj):
+                    ddv[j] += c0[j + q]
             if use_t:
-                c1 = col[1]
-                c2 = col[2]
-                for j in range(j0, j1):
-                    s1 = c1[j]
-                    sc = c2[j]
-                    for q in range(1, bs):
-                        s1 += c1[j + q]
-                        sc += c2[j + q]
-                    dd[j] = dd[j] / max(s1, one) + crho * sc
+                c1 = col[1, j0:j1 + bs - 1]
+                c2 = col[2, j0:j1 + bs - 1]
+                s1 = trust_sum[:nj]
+                sc = colour_sum[:nj]
+                for j in range(nj):
+                    s1[j] = c1[j]
+                    sc[j] = c2[j]
+                for q in range(1, bs):
+                    for j in range(nj):
+                        s1[j] += c1[j + q]
+                        sc[j] += c2[j + q]
+                for j in range(nj):
+                    ddv[j] = ddv[j] / max(s1[j], one) + crho * sc[j]
             else:
-                for j in range(j0, j1):
-                    dd[j] *= inb
-            for j in range(j0, j1):
-                if not dd[j] > zero:
-                    dd[j] = zero
+                for j in range(nj):
+                    ddv[j] *= inb
+            for j in range(nj):
+                if not ddv[j] > zero:
+                    ddv[j] = zero
             if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
                 _offer_row(dd, j0, j1, j0, np.int32(oid), rd[i - h0], ri[i - h0], seeded)
             if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
