@@ -40,7 +40,9 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     The pixels go in chunks, each statistic a loop over the chunk's pixels inside a loop over the k matches,
     without branches, so that LLVM runs it on vectors of pixels; every pixel's sums are taken in the order of
     its matches, as one pixel at a time would (the same values). Rows and columns come from flat indices by
-    float64 floor, exact for any index below 2^40.
+    float64 floor, exact for any index below 2^40. The chunk's arrays are views that start at 0 and the gathers
+    index by unsigned ints: numba wraps a negative signed index around, a test on every access that LLVM drops
+    only where it can tell the index is not negative.
     """
     k = idx.shape[1]
     hw = idx.shape[2]
@@ -61,7 +63,8 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
         i0 = t - n * hw
         c = min(size, t1 - t, hw - i0)
         xn = x[n]
-        rsn = range_sigma[n] if with_range else x[n]
+        xc = xn[i0:i0 + c]
+        rsn = range_sigma[n, i0:i0 + c] if with_range else xc
         for a in range(acc.shape[0]):
             for u in range(c):
                 acc[a, u] = 0.0
@@ -70,23 +73,23 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
             rows[u] = np.floor((i0 + u + 0.5) * inv_w)
             cols[u] = (i0 + u) - rows[u] * width
         for m in range(k):
-            im = idx[n, m]
-            wr = wt[n, m]
+            im = idx[n, m, i0:i0 + c]
+            wr = wt[n, m, i0:i0 + c]
             xr, yr, dr, wmr = xm[m], dym[m], dxm[m], wm[m]
             for u in range(c):
-                j = im[i0 + u]
-                xr[u] = xn[j]
+                j = im[u]
+                xr[u] = xn[np.uint64(j)]
                 jr = np.floor((j + 0.5) * inv_w)
                 yr[u] = jr - rows[u]
                 dr[u] = (j - jr * width) - cols[u]
             if with_range:
                 for u in range(c):
-                    rs = np.float64(rsn[i0 + u])
-                    r = (xr[u] - xn[i0 + u]) / (rs if rs > 0.0 else 1.0)
-                    wmr[u] = wr[i0 + u] * np.exp(-0.5 * r * r) if rs > 0.0 else wr[i0 + u]
+                    rs = np.float64(rsn[u])
+                    r = (xr[u] - xc[u]) / (rs if rs > 0.0 else 1.0)
+                    wmr[u] = wr[u] * np.exp(-0.5 * r * r) if rs > 0.0 else wr[u]
             else:
                 for u in range(c):
-                    wmr[u] = wr[i0 + u]
+                    wmr[u] = wr[u]
             for u in range(c):
                 w = wmr[u]
                 sw[u] += w
@@ -112,7 +115,7 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
                 syx[u] += w * ey * ex
                 syv[u] += w * ey * d
                 sxv[u] += w * ex * d
-        s0, s1, s2 = stats[n, 0], stats[n, 1], stats[n, 2]
+        s0, s1, s2 = stats[n, 0, i0:i0 + c], stats[n, 1, i0:i0 + c], stats[n, 2, i0:i0 + c]
         for u in range(c):
             s = sw[u] if sw[u] > 0.0 else 1.0
             v = var[u] / s
@@ -132,9 +135,9 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
                 xbu = xbu - (gy * oy[u] + gx * ox[u])
                 v = res if res > 0.0 else 0.0
             # no centre left (range weights): no estimate, never passes the variance gate
-            s0[i0 + u] = xbu
-            s1[i0 + u] = np.inf if sw[u] <= 1e-12 else v
-            s2[i0 + u] = oy[u] * oy[u] + ox[u] * ox[u]
+            s0[u] = xbu
+            s1[u] = np.inf if sw[u] <= 1e-12 else v
+            s2[u] = oy[u] * oy[u] + ox[u] * ox[u]
         if with_alpha:
             a0, a1 = acc[0], acc[1]  # Σω and x̄ are written out: reuse their rows
             for u in range(c):
@@ -142,16 +145,18 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
                 a1[u] = 0.0
             g0, g1 = g[n, 0], g[n, 1]
             for m in range(k):
-                im = idx[n, m]
-                wr = wt[n, m]
+                im = idx[n, m, i0:i0 + c]
+                wr = wt[n, m, i0:i0 + c]
                 for u in range(c):
-                    j = im[i0 + u]
-                    w = wr[i0 + u]
+                    j = np.uint64(im[u])
+                    w = wr[u]
                     a0[u] += w * g0[j]
                     a1[u] += w * g1[j]
+            al0 = alpha[n, 0, i0:i0 + c]
+            al1 = alpha[n, 1, i0:i0 + c]
             for u in range(c):
-                alpha[n, 0, i0 + u] = a0[u]
-                alpha[n, 1, i0 + u] = a1[u]
+                al0[u] = a0[u]
+                al1[u] = a1[u]
         t += c
 
 
