@@ -38,11 +38,12 @@ def _pixels(i0, i1, first, y0, obs, x, idx, w0, floor_, tau, tiny, q_old, q_new,
     xm = np.empty(k)  # the pixel's matched values and renormalised weights, read once
     wm = np.empty(k)
     changed = 0
-    for i in range(i0, i1):
+    for ii in range(i0, i1):
+        i = np.uint64(ii)  # unsigned: no wraparound test on each access (numba's, for negative signed indices)
         if not first:
             stale = 0
             for m in range(k):
-                stale |= dirty_old[idx[m, i]]
+                stale |= dirty_old[np.uint64(idx[m, i])]
             if stale == 0:
                 q_new[i] = q_old[i]
                 dirty_new[i] = 0
@@ -56,7 +57,7 @@ def _pixels(i0, i1, first, y0, obs, x, idx, w0, floor_, tau, tiny, q_old, q_new,
             continue
         s = 0.0
         for m in range(k):
-            j = idx[m, i]
+            j = np.uint64(idx[m, i])
             xm[m] = x[j]
             wm[m] = w0[m, i] * q_old[j]
             s += wm[m]
