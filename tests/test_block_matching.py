@@ -163,6 +163,17 @@ class TestBlockMatchContract:
             assert torch.equal(fast.index, ref.index), backend
         assert (ref.weight == 0.25).all()
 
+    @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+    def test_many_exact_ties_rank_as_the_reference(self, dtype):
+        """Small integer depths: many distances are equal, and equal sums are equal means in either dtype, so the order
+        of the lists (float32's packed keys, float64's pairs), ties to the smaller offset, is the reference's exactly."""
+        g = torch.Generator().manual_seed(3)
+        x = torch.randint(0, 4, (2, 1, 20, 23), generator=g).to(dtype)
+        ref = block_match_reference(x, None, None, block_size=3, search_window=7, k=12)
+        fast = block_match(x, None, None, block_size=3, search_window=7, k=12, backend="numba")
+        assert torch.equal(fast.index, ref.index)
+        torch.testing.assert_close(fast.dist, ref.dist)  # the mean over the block: 1/b² times the sum, to round-off
+
     @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
     def test_cuda_matches_cpu(self):
         x, c, t = _inputs()

@@ -137,11 +137,93 @@ def _listed_rank(oid, ri, j):
     return False
 
 
+# ---- float32: each list entry packed into one uint64 key, the distance's bits above the offset id. A distance is
+# never negative or NaN (clamped at 0 before it is offered), and the bits of such floats order as the floats do, so
+# the keys order exactly as the pairs (distance, offset id): an offer to a rank is one max and one min, where the
+# pairs take several compares and selects (float64 has no room for the id and keeps the pairs).
+_HIGH = np.uint64(32)
+_LOW = np.uint64(0xFFFFFFFF)
+
+
+@njit(cache=True, nogil=True)
+def _pack(rd, ri, keys):
+    """The lists ``rd`` (float32) and ``ri`` (int32), (rows, k, W), as keys (rows, k, W)."""
+    bits = rd.view(np.uint32)
+    for a in range(rd.shape[0]):
+        for m in range(rd.shape[1]):
+            for j in range(rd.shape[2]):
+                keys[a, m, j] = (np.uint64(bits[a, m, j]) << _HIGH) | np.uint64(np.uint32(ri[a, m, j]))
+
+
+@njit(cache=True, nogil=True)
+def _unpack(keys, rd, ri):
+    """:func:`_pack` undone."""
+    bits = rd.view(np.uint32)
+    for a in range(rd.shape[0]):
+        for m in range(rd.shape[1]):
+            for j in range(rd.shape[2]):
+                key = keys[a, m, j]
+                bits[a, m, j] = np.uint32(key >> _HIGH)
+                ri[a, m, j] = np.int32(key & _LOW)
+
+
+@njit(cache=True, nogil=True)
+def _offer_keys(high, j0, j1, a0, oid, keys, seeded):
+    """:func:`_offer_row` for the key lists ``keys`` (k, W) of a row: ``high`` holds the distances' bits shifted
+    into place (``uint64(bits) << 32``), the keys offered are ``high[j] | oid``."""
+    if j1 <= j0:
+        return
+    k = keys.shape[0]
+    n = j1 - j0
+    hv = high[j0:j1]
+    o = np.uint64(oid)
+    last = keys[k - 1, a0:a0 + n]
+    count = 0
+    for j in range(n):
+        count += (hv[j] | o) < last[j]
+    if count == 0:
+        return
+    if seeded or k > 16 or count * 16 < n:
+        for j in range(n):
+            key = hv[j] | o
+            jj = a0 + j
+            if not key < keys[k - 1, jj]:
+                continue
+            if seeded and _listed_key(o, keys, jj):
+                continue
+            m = k - 1
+            while m > 0 and key < keys[m - 1, jj]:
+                keys[m, jj] = keys[m - 1, jj]
+                m -= 1
+            keys[m, jj] = key
+        return
+    for m in range(k - 1, 0, -1):  # rank m after the offer: rank m-1 if the offer beats it, else the smaller
+        c = keys[m, a0:a0 + n]
+        p = keys[m - 1, a0:a0 + n]
+        for j in range(n):
+            c[j] = min(max(hv[j] | o, p[j]), c[j])
+    c = keys[0, a0:a0 + n]
+    for j in range(n):
+        c[j] = min(hv[j] | o, c[j])
+
+
+@njit(cache=True, inline="always")
+def _listed_key(o, keys, j):
+    """:func:`_listed_rank` for key lists."""
+    for m in range(keys.shape[0]):
+        if keys[m, j] & _LOW == o:
+            return True
+    return False
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
-def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded, dist, index):
+def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded, dist, index,
+          keys):
     """Running top-k for image rows [h0, h1); ``topd/topi`` are (h1-h0, W, k) views of this band: the working lists,
     read when ``seeded`` and written at the end, unless ``dist`` and ``index`` (k, H, W) are not empty: then the band
     writes its rows of the final distances and flat indices there instead (what :func:`_finalize` would make).
+    ``keys``: None, or for float32 planes a (h1-h0, k, W) uint64 array in which the lists run as packed keys
+    (numba compiles only the branch the argument's type selects).
 
     ``xp, tp`` (Hp, Wp) and ``cp`` (C, Hp, Wp): planes replicate-padded by r, then zero-padded by R.
     ``consts`` = (ρ/C, ρ/(C·b²), 1/b²) in the planes' dtype, so that float32 stays float32 (SIMD width).
@@ -168,6 +250,9 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
             for j in range(big_w):
                 rd[a, m, j] = topd[a, j, m] if seeded else np.inf
                 ri[a, m, j] = topi[a, j, m] if seeded else _ID_NONE
+    high = np.zeros(big_w, dtype=np.uint64)  # a row's distances as the high halves of keys
+    if keys is not None:
+        _pack(rd, ri, keys)
     for io in range(order.shape[0]):
         oid = order[io]
         dy = oid // s - big_r
@@ -263,10 +348,22 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
             for j in range(nj):
                 if not ddv[j] > zero:
                     ddv[j] = zero
-            if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
-                _offer_row(dd, j0, j1, j0, np.int32(oid), rd[i - h0], ri[i - h0], seeded)
-            if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
-                _offer_row(dd, j0, j1, j0 + dx, np.int32(mid), rd[i + dy - h0], ri[i + dy - h0], seeded)
+            if keys is None:
+                if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
+                    _offer_row(dd, j0, j1, j0, np.int32(oid), rd[i - h0], ri[i - h0], seeded)
+                if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
+                    _offer_row(dd, j0, j1, j0 + dx, np.int32(mid), rd[i + dy - h0], ri[i + dy - h0], seeded)
+            else:
+                bits = dd.view(np.uint32)[j0:j1]
+                hv = high[j0:j1]
+                for j in range(nj):
+                    hv[j] = np.uint64(bits[j]) << _HIGH
+                if i >= f0 and i < f1:
+                    _offer_keys(high, j0, j1, j0, oid, keys[i - h0], seeded)
+                if i >= m0 and i < m1:
+                    _offer_keys(high, j0, j1, j0 + dx, mid, keys[i + dy - h0], seeded)
+    if keys is not None:
+        _unpack(keys, rd, ri)
     if dist.size > 0:
         for a in range(h1 - h0):
             i = h0 + a
@@ -355,10 +452,13 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
                       dtype=xp.dtype)
 
+    packed = xp.dtype == np.float32
+
     def band(n: int) -> None:  # a band writes only its own rows: the bands run in any order
         b, h0, h1 = bands[n]
+        keys = np.empty((h1 - h0, k, w), np.uint64) if packed else None
         _band(xp[b], tp[b], cp[b], use_t, h, w, r, big_r, order, both, consts[b], h0, h1, topd[b, h0:h1],
-              topi[b, h0:h1], seeded, *out_of(b))
+              topi[b, h0:h1], seeded, *out_of(b), keys)
 
     run_tasks(band, len(bands))
 
