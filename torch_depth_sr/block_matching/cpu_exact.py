@@ -8,7 +8,8 @@ each mirrored pair is computed and offered to both pixels. Offsets are visited n
 ``k``-th distance is tight early and few offers need an insertion. Keys compare as ``(distance, offset
 id)``: ties go to the smaller id whatever the visiting order, as in the unfold reference. A band keeps
 its lists rank-major, so that a row's offer is a vector test against the k-th distances, and (short
-lists, many insertions) a branch-free vector merge of every rank.
+lists, many insertions) a branch-free vector merge of every rank. In float32 each entry is one uint64 key, the
+distance's bits above the offset id, which orders as the pair does: a rank's merge is then a max and a min.
 
 Bands of rows run in parallel: the kernels release the GIL (``nogil=True``) and
 :func:`~torch_depth_sr.native.run_tasks` runs the bands on ``torch.get_num_threads()`` threads (rather than
