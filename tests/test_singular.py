@@ -225,3 +225,30 @@ def test_line_support_keeps_thin_structures_and_rejects_flying_and_impulse_pixel
     obs[..., 4, 2] = 0  # a missing pixel breaks the chain but both halves are still lines
     got = line_support(y, obs, 2.0)[0, 0]
     assert bool(got[:4, 2].all()) and bool(got[5:, 2].all()) and not bool(got[4, 2])
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_support_kernel_matches_torch_path(dtype, monkeypatch):
+    """supported_or_line's numba kernel against its tensor operations (TORCH_DEPTH_SR_NO_NUMBA), bit for bit, on
+    surfaces of a few levels (many neighbours exactly at the tolerance), noise, holes, NaN, per-sample tolerances and
+    images down to one row or column."""
+    from torch_depth_sr import singular
+
+    g = torch.Generator().manual_seed(0)
+    cases = []
+    for trial in range(24):
+        h, w = torch.randint(2, 30, (2,), generator=g).tolist()
+        h, w = (1, 9) if trial == 0 else (7, 1) if trial == 1 else (h, w)
+        y = torch.randint(0, 6, (2, 1, h, w), generator=g).to(dtype) * 1.5
+        y = y + (trial % 2) * 0.2 * torch.randn(2, 1, h, w, generator=g, dtype=dtype)
+        y[0, 0, 0, 0] = float("nan")
+        obs = (torch.rand(2, 1, h, w, generator=g) > 0.2).to(dtype)
+        tol = torch.rand(2, generator=g, dtype=dtype) + 0.5 if trial % 3 else 1.5
+        cases.append((y, obs, tol, 1 + trial % 5))
+    from torch_depth_sr.native import cpu_kernel
+
+    assert cpu_kernel("singular_kernel", "support_cpu") is not None  # the kernel ran, not the torch path
+    got = [singular.supported_or_line(*c) for c in cases]
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    for c, a in zip(cases, got):
+        assert torch.equal(a, singular.supported_or_line(*c))

@@ -53,7 +53,8 @@ def test_warmup_leaves_nothing_for_the_forward_to_compile(scene):
     sigs = native.compiled_signatures()
     for kernel in ("block_matching.cpu_exact._band", "block_matching.cpu_exact._finalize",
                    "block_matching.refine_cpu._refine", "edge_snap_kernel._sided", "edge_snap_kernel._refit",
-                   "fill_kernel._pixels", "nonlocal_kernel._pixels", "singular_kernel._pixels"):
+                   "fill_kernel._pixels", "nonlocal_kernel._pixels", "singular_kernel._pixels",
+                   "singular_kernel._agreeing", "singular_kernel._support_rule"):
         held = " ".join(sigs.get(kernel, []))
         assert "float32" in held and "float64" in held, (kernel, sigs.get(kernel))
     again = warmup()

@@ -29,7 +29,7 @@ import torch
 from ._checks import check_4d, check_per_sample, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError
-from .native import cpu_kernel, host_path
+from .native import cpu_kernel, host_kernel, host_path
 
 __all__ = ["detect_singular", "neighbour_support", "line_support"]
 
@@ -161,6 +161,10 @@ def supported_or_line(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
                       support: int) -> torch.Tensor:
     """``(neighbour_support(y, observed, tol) >= support) | line_support(y, observed, tol)`` from one look at the
     neighbours."""
+    kernel = host_kernel("singular_kernel", "support_cpu", y.detach())
+    if kernel is not None:  # the same tests, one pass over the pixels instead of ~100 over the image
+        obs, _, tol_t = _measured(y, observed, tol)
+        return kernel(y.detach(), obs, tol_t.reshape(-1), support)
     g = _Agreement(y, observed, tol)
     return (g.count >= support) | _lines(g)
 

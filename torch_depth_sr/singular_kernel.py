@@ -24,7 +24,7 @@ from numba import njit
 
 from .native import as_numpy, run_range
 
-__all__ = ["singular_rounds_cpu"]
+__all__ = ["singular_rounds_cpu", "support_cpu"]
 
 
 @njit(cache=True, fastmath=False, nogil=True)
@@ -87,6 +87,103 @@ def _pixels(i0, i1, first, y0, obs, x, idx, w0, floor_, tau, tiny, q_old, q_new,
         dirty_new[i] = ch
         changed += ch
     return changed
+
+
+# ---- the support rule (singular.supported_or_line) in two passes over rows: each pixel's count of agreeing
+# neighbours, then the rule, which reads the neighbours' counts (the middle of a chain).
+_DY = np.array([-1, -1, -1, 0, 0, 1, 1, 1], dtype=np.int64)  # singular._OFFSETS: dy outer, dx inner, no centre
+_DX = np.array([-1, 0, 1, -1, 1, -1, 0, 1], dtype=np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _agreeing(t0, t1, y, obs, tol, count):
+    """Rows ``[t0, t1)`` of the flattened (B, H): how many measured 8-neighbours of a measured pixel lie within
+    ``tol[n]`` of it (0 at unmeasured pixels). ``y`` (B, H, W) holds 0 where ``obs`` (B, H, W) is 0. A row takes
+    eight vector loops, one per neighbour, over the columns whose neighbour is inside the image."""
+    _, h, w = y.shape
+    for t in range(t0, t1):
+        n = t // h
+        i = t - n * h
+        tl = tol[n]
+        cnt = count[n, i]
+        for j in range(w):
+            cnt[j] = 0
+        for d in range(8):
+            yy = i + _DY[d]
+            if yy < 0 or yy >= h:
+                continue
+            dx = _DX[d]
+            j0 = max(0, -dx)
+            j1 = min(w, w - dx)
+            a = y[n, i, j0:j1]
+            oa = obs[n, i, j0:j1]
+            b = y[n, yy, j0 + dx:j1 + dx]
+            ob = obs[n, yy, j0 + dx:j1 + dx]
+            c = cnt[j0:j1]
+            for j in range(j1 - j0):
+                c[j] += oa[j] & ob[j] & (abs(b[j] - a[j]) <= tl)
+
+
+@njit(cache=True, nogil=True)
+def _support_rule(t0, t1, y, obs, tol, tol2, limits, support, count, out):
+    """Rows ``[t0, t1)``: ``count >= support``, or a pixel on a line (``singular._lines``, the same tests in the
+    same dtype). ``tol2`` = 2·tol and ``limits`` = (inf, −inf) in the dtype."""
+    _, h, w = y.shape
+    on = np.zeros(8, dtype=np.bool_)
+    apart = np.zeros(8, dtype=np.bool_)
+    for t in range(t0, t1):
+        n = t // h
+        i = t - n * h
+        for j in range(w):
+            c = count[n, i, j]
+            if not obs[n, i, j]:
+                out[n, i, j] = False
+                continue
+            if c >= support:
+                out[n, i, j] = True
+                continue
+            if c > 2:  # more agreeing neighbours make a surface, not a line
+                out[n, i, j] = False
+                continue
+            v = y[n, i, j]
+            lo = limits[0]  # the extremes of the disagreeing neighbours, in the dtype (as its sums)
+            hi = limits[1]
+            chain = c >= 2
+            for d in range(8):
+                yy = i + _DY[d]
+                xx = j + _DX[d]
+                inside = 0 <= yy < h and 0 <= xx < w
+                on[d] = inside and obs[n, yy, xx]
+                agree = on[d] and abs(y[n, yy, xx] - v) <= tol[n]
+                other = on[d] and not agree
+                if other:
+                    lo = min(lo, y[n, yy, xx])
+                    hi = max(hi, y[n, yy, xx])
+                apart[d] = other or not inside
+                if agree and count[n, yy, xx] >= 2:  # the end of a chain: an agreeing neighbour in its middle
+                    chain = True
+            beyond = v <= lo - tol2[n] or v >= hi + tol2[n]
+            between = False
+            for d in range(4):  # offsets d and 7 - d are opposite
+                between = between or (apart[d] and apart[7 - d] and (on[d] or on[7 - d]))
+            out[n, i, j] = chain and beyond and between
+
+
+def support_cpu(y: torch.Tensor, observed: torch.Tensor, tol: torch.Tensor, support: int) -> torch.Tensor:
+    """``singular.supported_or_line`` of CPU float32/float64 tensors: ``y`` (B,1,H,W), ``observed`` (B,1,H,W) bool
+    (measured and finite), ``tol`` (B,) in ``y``'s dtype → (B,1,H,W) bool."""
+    b, _, h, w = y.shape
+    np_dt = np.float64 if y.dtype == torch.float64 else np.float32
+    yn = as_numpy(torch.where(observed, y, torch.zeros_like(y)), (b, h, w), np_dt)
+    on = as_numpy(observed, (b, h, w), np.bool_)
+    tl = as_numpy(tol, (b,), np_dt)
+    tl2 = as_numpy(2 * tol, (b,), np_dt)
+    count = np.empty((b, h, w), np.int32)
+    out = np.empty((b, h, w), np.bool_)
+    run_range(_agreeing, b * h, yn, on, tl, count)
+    limits = np.array([np.inf, -np.inf], np_dt)
+    run_range(_support_rule, b * h, yn, on, tl, tl2, limits, int(support), count, out)
+    return torch.from_numpy(out).view(b, 1, h, w)
 
 
 def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, q, p):

@@ -16,7 +16,7 @@ from .guided_filters import domain_transform_filter
 from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
-from .singular import detect_singular
+from .singular import detect_singular, supported_or_line
 from .stream.change import _nearest_distance as nearest_distance, depth_votes, local_spread
 from .stream.matching import dilate
 
@@ -43,8 +43,9 @@ def _warmup_steps(dtype: torch.dtype):
         with torch.no_grad():
             nonlocal_terms(x, grad(x), held["m"], value_weight=1.0, plane_ridge=0.1, range_sigma=1.0)
 
-    def singular():
+    def singular():  # the test's rounds and its support rule (neighbours and lines)
         detect_singular(x, x, trust, held["m"], sigma_floor=0.1, rounds=2, backend="numba")
+        supported_or_line(10 * x, trust, 0.5, 3)
 
     def edges():  # both edge steps as the model calls them (no gradient; the refit finds edge pixels in 10·x)
         with torch.no_grad():
