@@ -46,32 +46,34 @@ def _listed(oid, ti, j):
 
 
 @njit(cache=True, inline="always")
-def _block_distance(xp, tp, cp, use_t, ya, xa, yb, xb, bs, crho, inb):
-    """d(i, j) for blocks whose top-left corners are (ya, xa) and (yb, xb) in the padded planes.
+def _block_distance(cx, ct, cc, xp, tp, cp, use_t, yb, xb, bs, crho, inb):
+    """d(i, j) between the block held in ``cx, ct`` (bs, bs) and ``cc`` (C, bs, bs), pixel i's, and the block whose
+    top-left corner is (yb, xb) in the padded planes; the sums in the order of the block's rows, then columns.
 
-    Accumulates in the planes' dtype (float32 stays float32, like the exact kernel); ``crho``, ``inb`` too.
+    Accumulates in the planes' dtype (float32 stays float32, like the exact kernel); ``crho``, ``inb`` too. The
+    candidate's indices are unsigned: numba tests a signed index for a negative value at every access.
     """
-    zero = xp[ya, xa] - xp[ya, xa]
+    zero = cx[0, 0] - cx[0, 0]
     num = zero
     cnt = zero
     col = zero
+    x0 = np.uint64(xb)
     for u in range(bs):
-        xa_row = xp[ya + u]
-        xb_row = xp[yb + u]
+        xb_row = xp[np.uint64(yb + u)]
+        tb_row = tp[np.uint64(yb + u)]
         for v in range(bs):
-            df = xa_row[xa + v] - xb_row[xb + v]
+            df = cx[u, v] - xb_row[x0 + np.uint64(v)]
             if use_t:
-                tt = tp[ya + u, xa + v] * tp[yb + u, xb + v]
+                tt = ct[u, v] * tb_row[x0 + np.uint64(v)]
                 num += tt * (df * df)
                 cnt += tt
             else:
                 num += df * df
     for c in range(cp.shape[0]):
         for u in range(bs):
-            ca = cp[c, ya + u]
-            cb = cp[c, yb + u]
+            cb = cp[c, np.uint64(yb + u)]
             for v in range(bs):
-                dc = ca[xa + v] - cb[xb + v]
+                dc = cc[c, u, v] - cb[x0 + np.uint64(v)]
                 col += dc * dc
     one = zero + 1
     d = num / max(cnt, one) if use_t else num * inb
@@ -100,7 +102,17 @@ def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self
         td = topd[b, i]
         ti = topi[b, i]
         pb = prev[b]
+        cx = np.empty((bs, bs), xp.dtype)  # pixel i's block, read once for all its candidates
+        ct = np.empty((bs, bs), xp.dtype)
+        cc = np.empty((cp.shape[1], bs, bs), xp.dtype)
         for j in range(big_w):
+            for u in range(bs):
+                for v in range(bs):
+                    cx[u, v] = xb[big_r + i + u, big_r + j + v]
+                    if use_t:
+                        ct[u, v] = tb[big_r + i + u, big_r + j + v]
+                    for c in range(cp.shape[1]):
+                        cc[c, u, v] = cb[c, big_r + i + u, big_r + j + v]
             for m in range(td.shape[1]):
                 td[j, m] = np.inf
                 ti[j, m] = _ID_NONE
@@ -127,8 +139,7 @@ def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self
                         continue
                     if src > 0 and _listed(oid, ti, j):
                         continue
-                    d = _block_distance(xb, tb, cb, use_t, big_r + i, big_r + j, big_r + i + dy, big_r + j + dx,
-                                        bs, crho, inb)
+                    d = _block_distance(cx, ct, cc, xb, tb, cb, use_t, big_r + i + dy, big_r + j + dx, bs, crho, inb)
                     _offer(d, oid, td, ti, j)
 
 
