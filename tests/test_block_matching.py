@@ -441,3 +441,30 @@ def test_the_default_tiers_device_path_re_matches_as_the_cpu_does(monkeypatch):
     rmse = lambda out: float((out - gt).pow(2).mean().sqrt())  # noqa: E731
     assert abs(rmse(device) - rmse(host)) <= 0.002 * rmse(host), (rmse(device), rmse(host))
     assert float(((device - host).abs() < 1e-3).double().mean()) > 0.98
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("reach,include_self", [(0, False), (1, False), (0, True)])
+def test_refine_planes_give_the_candidates_distances_bit_for_bit(dtype, reach, include_self):
+    """The re-ranking's two ways to a candidate's distance, every offset's in vector loops first (small windows) or
+    each candidate's alone, keep the same lists: the same sums in the same order, compared in the same precision."""
+    import numpy as np
+
+    from torch_depth_sr.block_matching import refine_cpu as rc
+    from torch_depth_sr.block_matching.cpu_exact import padded_planes
+
+    g = torch.Generator().manual_seed(1)
+    h, w, k = 37, 29, 6
+    x = torch.rand(1, 1, h, w, generator=g).to(dtype)
+    x[..., 10:20, 5:15] = 0.5  # a flat patch: equal distances, ties to the smaller offset
+    c = torch.rand(1, 3, h, w, generator=g).to(dtype)
+    t = (torch.rand(1, 1, h, w, generator=g) > 0.2).to(dtype)
+    prev = block_match(x + 0.01, c, t, block_size=3, search_window=7, k=k).index.numpy()
+    xp, tp, cp, use_t = padded_planes(x, c, t, 1, 3)
+    consts = np.array([[400 / 27, 1 / 9]], dtype=xp.dtype)
+    out = []
+    for planes_too in (True, False):
+        topd, topi = np.empty((1, h, w, k), xp.dtype), np.empty((1, h, w, k), np.int32)
+        rc._refine(xp, tp, cp, use_t, h, w, 1, 3, prev, reach, include_self, consts, topd, topi, 8, planes_too)
+        out.append((topd, topi))
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])

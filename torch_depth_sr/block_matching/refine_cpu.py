@@ -3,7 +3,9 @@
 Candidates of pixel ``p`` are offsets ``o`` (so the block at ``p + o``): the offsets of ``p``'s own
 previous matches and those of its neighbours' previous matches (the coherence PatchMatch exploits:
 the neighbour of a good match is a good match for the neighbour). Each distinct candidate's distance
-is computed directly over the block (same formula as the exact search) and kept in a sorted top-k.
+is computed directly over the block (same formula as the exact search) and kept in a sorted top-k. In small windows
+the distances of every offset are computed first, a vector loop per row and offset pair, and the candidates read
+theirs: the same sums in the same order, so the same lists, bit for bit.
 """
 from __future__ import annotations
 
@@ -17,6 +19,12 @@ from ..native import kernel_threads
 from .cpu_exact import _ID_NONE, finalize, padded_planes, search
 
 __all__ = ["refine_cpu"]
+
+_BAND_ROWS = 16  # rows per task of the re-ranking
+# windows up to this side compute every offset's distance for every pixel (vector loops) rather than each candidate's
+# alone: at 7×7 (48 offsets, 24 by symmetry, for 10 candidates) 640×480, one thread: 200-217 -> 110-125 ms; a 21×21
+# window has 440 offsets for the same 10 candidates
+_PLANES_UP_TO = 9
 
 
 # The pixel-major top-k list of the re-ranking (the exact search keeps rank-major lists). Kept in this file with
@@ -81,66 +89,152 @@ def _block_distance(cx, ct, cc, xp, tp, cp, use_t, yb, xb, bs, crho, inb):
     return d if d > zero else zero
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, out, num, cnt, col):
+    """:func:`_block_distance` of every pixel ``(i, j)`` of row ``i`` whose candidate ``(i + dy, j + dx)`` lies in the
+    image (``dy >= 0``), into ``out[j]``: the same sums in the same order (the block's rows, then columns, then the channels),
+    each a vector loop over the row's pixels."""
+    bs = 2 * r + 1
+    j0 = max(0, -dx)
+    j1 = min(big_w, big_w - dx)
+    n = j1 - j0
+    if n <= 0:
+        return
+    zero = xb[0, 0] - xb[0, 0]
+    nu = num[:n]
+    ct = cnt[:n]
+    co = col[:n]
+    for j in range(n):
+        nu[j] = zero
+        ct[j] = zero
+        co[j] = zero
+    for u in range(bs):
+        xa = xb[big_r + i + u, big_r + j0:big_r + j1 + bs - 1]
+        xc = xb[big_r + i + dy + u, big_r + j0 + dx:big_r + j1 + dx + bs - 1]
+        ta = tb[big_r + i + u, big_r + j0:big_r + j1 + bs - 1]
+        tc = tb[big_r + i + dy + u, big_r + j0 + dx:big_r + j1 + dx + bs - 1]
+        for v in range(bs):
+            if use_t:
+                for j in range(n):
+                    df = xa[j + v] - xc[j + v]
+                    tt = ta[j + v] * tc[j + v]
+                    nu[j] += tt * (df * df)
+                    ct[j] += tt
+            else:
+                for j in range(n):
+                    df = xa[j + v] - xc[j + v]
+                    nu[j] += df * df
+    for c in range(cb.shape[0]):
+        for u in range(bs):
+            ca = cb[c, big_r + i + u, big_r + j0:big_r + j1 + bs - 1]
+            cc = cb[c, big_r + i + dy + u, big_r + j0 + dx:big_r + j1 + dx + bs - 1]
+            for v in range(bs):
+                for j in range(n):
+                    dc = ca[j + v] - cc[j + v]
+                    co[j] += dc * dc
+    one = zero + 1
+    o = out[j0:j1]
+    for j in range(n):
+        d = nu[j] / max(ct[j], one) if use_t else nu[j] * inb
+        d += crho * co[j]
+        o[j] = d if d > zero else zero
+
+
 # parallel=True (numba.prange), unlike the other kernels (nogil functions run by native.run_tasks): as a serial nogil
 # function this body ran 20-30 % slower on one thread, even with error_model="numpy" (docs/measurements/
 # numba-first-use/; numba compiles a prange body with noalias array arguments, the likely reason). That is worth the
 # 2-3 s of CPU that the parallel form adds to the first compilation.
 @njit(cache=True, parallel=True)
-def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi):
-    """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none)."""
+def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi, band,
+            planes_too):
+    """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none). Rows go in
+    bands of ``band``; with ``planes_too`` a band first computes the distance of every offset of the window for
+    each of its pixels, a vector loop per row and offset (:func:`_distance_row`), and its candidates read them
+    there; else each candidate's distance is computed alone (:func:`_block_distance`). The same distances."""
     bsz = xp.shape[0]
     bs = 2 * r + 1
     s = 2 * big_r + 1
     kp = prev.shape[1]
     centre = big_r * s + big_r
-    for n in prange(bsz * big_h):
-        b = n // big_h
-        i = n % big_h
+    nbands = (big_h + band - 1) // band
+    for n in prange(bsz * nbands):
+        b = n // nbands
+        h0 = (n % nbands) * band
+        h1 = min(big_h, h0 + band)
         crho = consts[b, 0]
         inb = consts[b, 1]
-        xb, tb, cb = xp[b], tp[b], cp[b]  # views made once per row: inside the pixel loop they would cost
-        td = topd[b, i]
-        ti = topi[b, i]
+        xb, tb, cb = xp[b], tp[b], cp[b]
         pb = prev[b]
         cx = np.empty((bs, bs), xp.dtype)  # pixel i's block, read once for all its candidates
         ct = np.empty((bs, bs), xp.dtype)
         cc = np.empty((cp.shape[1], bs, bs), xp.dtype)
-        for j in range(big_w):
-            for u in range(bs):
-                for v in range(bs):
-                    cx[u, v] = xb[big_r + i + u, big_r + j + v]
-                    if use_t:
-                        ct[u, v] = tb[big_r + i + u, big_r + j + v]
-                    for c in range(cp.shape[1]):
-                        cc[c, u, v] = cb[c, big_r + i + u, big_r + j + v]
-            for m in range(td.shape[1]):
-                td[j, m] = np.inf
-                ti[j, m] = _ID_NONE
-            for src in range(5 if reach > 0 else 1):
-                ni, nj = i, j
-                if src == 1:
-                    ni = i - reach
-                elif src == 2:
-                    ni = i + reach
-                elif src == 3:
-                    nj = j - reach
-                elif src == 4:
-                    nj = j + reach
-                if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
+        # float64: a distance is a float64 (its division and sum), compared so with the lists as the direct path does
+        planes = np.empty((s * s if planes_too else 0, h1 - h0, big_w), np.float64)
+        if planes_too:
+            num = np.empty(big_w, xp.dtype)
+            cnt = np.empty(big_w, xp.dtype)
+            col = np.empty(big_w, xp.dtype)
+            row = np.empty(big_w, np.float64)
+            for oid in range(centre, s * s):  # the centre and the offsets after it: (dy, dx) > (0, 0)
+                if oid == centre and not include_self:
                     continue
-                for m in range(kp):
-                    flat = pb[m, ni, nj]
-                    dy = flat // big_w - ni
-                    dx = flat % big_w - nj
-                    oid = (dy + big_r) * s + dx + big_r
-                    if oid == centre and not include_self:
+                dy = oid // s - big_r
+                dx = oid % s - big_r
+                mid = 2 * centre - oid  # the mirrored offset (-dy, -dx)
+                # d(p, p + o) = d(p + o, p), bit for bit (the same products and squares, summed in the same order):
+                # a row i gives pixel (i, j) its offset o and pixel (i + dy, j + dx) its offset -o
+                for i in range(max(0, h0 - dy), min(h1, big_h - dy)):
+                    _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, row, num, cnt, col)
+                    j0 = max(0, -dx)
+                    j1 = min(big_w, big_w - dx)
+                    if i >= h0:
+                        planes[oid, i - h0, j0:j1] = row[j0:j1]
+                    if h0 <= i + dy < h1 and oid != centre:
+                        planes[mid, i + dy - h0, j0 + dx:j1 + dx] = row[j0:j1]
+        for i in range(h0, h1):
+            td = topd[b, i]
+            ti = topi[b, i]
+            for j in range(big_w):
+                if not planes_too:
+                    for u in range(bs):
+                        for v in range(bs):
+                            cx[u, v] = xb[big_r + i + u, big_r + j + v]
+                            if use_t:
+                                ct[u, v] = tb[big_r + i + u, big_r + j + v]
+                            for c in range(cp.shape[1]):
+                                cc[c, u, v] = cb[c, big_r + i + u, big_r + j + v]
+                for m in range(td.shape[1]):
+                    td[j, m] = np.inf
+                    ti[j, m] = _ID_NONE
+                for src in range(5 if reach > 0 else 1):
+                    ni, nj = i, j
+                    if src == 1:
+                        ni = i - reach
+                    elif src == 2:
+                        ni = i + reach
+                    elif src == 3:
+                        nj = j - reach
+                    elif src == 4:
+                        nj = j + reach
+                    if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
                         continue
-                    if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
-                        continue
-                    if src > 0 and _listed(oid, ti, j):
-                        continue
-                    d = _block_distance(cx, ct, cc, xb, tb, cb, use_t, big_r + i + dy, big_r + j + dx, bs, crho, inb)
-                    _offer(d, oid, td, ti, j)
+                    for m in range(kp):
+                        flat = pb[m, ni, nj]
+                        dy = flat // big_w - ni
+                        dx = flat % big_w - nj
+                        oid = (dy + big_r) * s + dx + big_r
+                        if oid == centre and not include_self:
+                            continue
+                        if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
+                            continue
+                        if src > 0 and _listed(oid, ti, j):
+                            continue
+                        if planes_too:
+                            d = planes[oid, i - h0, j]
+                        else:
+                            d = _block_distance(cx, ct, cc, xb, tb, cb, use_t, big_r + i + dy, big_r + j + dx, bs,
+                                                crho, inb)
+                        _offer(d, oid, td, ti, j)
 
 
 def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
@@ -158,7 +252,8 @@ def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / (nc * nb), 1.0 / nb] for rb in rho.detach().cpu().double().tolist()], dtype=xp.dtype)
     kernel_threads()
-    _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi)
+    _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi,
+            _BAND_ROWS, search_window <= _PLANES_UP_TO)
     if lattice > 0:
         search(planes, h, w, block_size, search_window, rho, include_self, None, lattice, topd, topi, True)
     dist, index = finalize(topd, topi, search_window)
