@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from ..native import kernel_threads
+from ..native import kernel_threads, run_tasks
 from .cpu_exact import _ID_NONE, finalize, padded_planes, search
 
 __all__ = ["refine_cpu"]
@@ -140,101 +140,145 @@ def _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, out,
         o[j] = d if d > zero else zero
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _offset_planes(xb, tb, cb, use_t, big_h, big_w, r, big_r, include_self, crho, inb, h0, h1, planes):
+    """``planes[o, i - h0, j]`` = the distance of pixel ``(i, j)`` to its candidate at offset ``o``, for the rows
+    ``[h0, h1)`` and every offset ``o`` of the window whose candidate lies in the image (other entries unwritten).
+    A function of its own, not part of :func:`_refine`'s parallel loop, where numba would turn each slice copy into a
+    parallel loop of its own and compile for seconds longer."""
+    s = 2 * big_r + 1
+    centre = big_r * s + big_r
+    num = np.empty(big_w, xb.dtype)
+    cnt = np.empty(big_w, xb.dtype)
+    col = np.empty(big_w, xb.dtype)
+    row = np.empty(big_w, np.float64)
+    for oid in range(centre, s * s):  # the centre and the offsets after it: (dy, dx) > (0, 0)
+        if oid == centre and not include_self:
+            continue
+        dy = oid // s - big_r
+        dx = oid % s - big_r
+        mid = 2 * centre - oid  # the mirrored offset (-dy, -dx)
+        # d(p, p + o) = d(p + o, p), bit for bit (the same products and squares, summed in the same order): a row i
+        # gives pixel (i, j) its offset o and pixel (i + dy, j + dx) its offset -o
+        j0 = max(0, -dx)
+        j1 = min(big_w, big_w - dx)
+        for i in range(max(0, h0 - dy), min(h1, big_h - dy)):
+            _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, row, num, cnt, col)
+            if i >= h0:
+                out = planes[oid, i - h0]
+                for j in range(j0, j1):
+                    out[j] = row[j]
+            if h0 <= i + dy < h1 and oid != centre:
+                out = planes[mid, i + dy - h0]
+                for j in range(j0, j1):
+                    out[j + dx] = row[j]
+
+
+@njit(cache=True, inline="always")
+def _candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oids):
+    """The offsets of source ``src`` that pixel ``(i, j)`` re-ranks, into ``oids``; returns how many: the previous
+    matches of the pixel itself (``src`` 0) or of its neighbour ``reach`` away (1-4: up, down, left, right), inside
+    the image, not the centre unless ``include_self``, and (a neighbour's) not already in the list ``ti[j]``. A
+    source's offsets are distinct, so none of them is listed by another of the same source."""
+    ni, nj = i, j
+    if src == 1:
+        ni = i - reach
+    elif src == 2:
+        ni = i + reach
+    elif src == 3:
+        nj = j - reach
+    elif src == 4:
+        nj = j + reach
+    if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
+        return 0
+    s = 2 * big_r + 1
+    centre = big_r * s + big_r
+    n = 0
+    for m in range(pb.shape[0]):
+        flat = pb[m, ni, nj]
+        dy = flat // big_w - ni
+        dx = flat % big_w - nj
+        oid = (dy + big_r) * s + dx + big_r
+        if oid == centre and not include_self:
+            continue
+        if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
+            continue
+        if src > 0 and _listed(oid, ti, j):
+            continue
+        oids[n] = oid
+        n += 1
+    return n
+
+
 # parallel=True (numba.prange), unlike the other kernels (nogil functions run by native.run_tasks): as a serial nogil
 # function this body ran 20-30 % slower on one thread, even with error_model="numpy" (docs/measurements/
 # numba-first-use/; numba compiles a prange body with noalias array arguments, the likely reason). That is worth the
 # 2-3 s of CPU that the parallel form adds to the first compilation.
 @njit(cache=True, parallel=True)
-def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi, band,
-            planes_too):
-    """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none). Rows go in
-    bands of ``band``; with ``planes_too`` a band first computes the distance of every offset of the window for
-    each of its pixels, a vector loop per row and offset (:func:`_distance_row`), and its candidates read them
-    there; else each candidate's distance is computed alone (:func:`_block_distance`). The same distances."""
+def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi):
+    """prev: (B, kp, H, W) flat indices of the previous matches; reach: neighbour distance (0 = none). Each
+    candidate's distance computed alone (:func:`_block_distance`)."""
     bsz = xp.shape[0]
     bs = 2 * r + 1
     s = 2 * big_r + 1
-    kp = prev.shape[1]
-    centre = big_r * s + big_r
-    nbands = (big_h + band - 1) // band
-    for n in prange(bsz * nbands):
-        b = n // nbands
-        h0 = (n % nbands) * band
-        h1 = min(big_h, h0 + band)
+    for n in prange(bsz * big_h):
+        b = n // big_h
+        i = n % big_h
         crho = consts[b, 0]
         inb = consts[b, 1]
-        xb, tb, cb = xp[b], tp[b], cp[b]
+        xb, tb, cb = xp[b], tp[b], cp[b]  # views made once per row: inside the pixel loop they would cost
+        td = topd[b, i]
+        ti = topi[b, i]
         pb = prev[b]
         cx = np.empty((bs, bs), xp.dtype)  # pixel i's block, read once for all its candidates
         ct = np.empty((bs, bs), xp.dtype)
         cc = np.empty((cp.shape[1], bs, bs), xp.dtype)
-        # float64: a distance is a float64 (its division and sum), compared so with the lists as the direct path does
-        planes = np.empty((s * s if planes_too else 0, h1 - h0, big_w), np.float64)
-        if planes_too:
-            num = np.empty(big_w, xp.dtype)
-            cnt = np.empty(big_w, xp.dtype)
-            col = np.empty(big_w, xp.dtype)
-            row = np.empty(big_w, np.float64)
-            for oid in range(centre, s * s):  # the centre and the offsets after it: (dy, dx) > (0, 0)
-                if oid == centre and not include_self:
-                    continue
-                dy = oid // s - big_r
-                dx = oid % s - big_r
-                mid = 2 * centre - oid  # the mirrored offset (-dy, -dx)
-                # d(p, p + o) = d(p + o, p), bit for bit (the same products and squares, summed in the same order):
-                # a row i gives pixel (i, j) its offset o and pixel (i + dy, j + dx) its offset -o
-                for i in range(max(0, h0 - dy), min(h1, big_h - dy)):
-                    _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, row, num, cnt, col)
-                    j0 = max(0, -dx)
-                    j1 = min(big_w, big_w - dx)
-                    if i >= h0:
-                        planes[oid, i - h0, j0:j1] = row[j0:j1]
-                    if h0 <= i + dy < h1 and oid != centre:
-                        planes[mid, i + dy - h0, j0 + dx:j1 + dx] = row[j0:j1]
-        for i in range(h0, h1):
-            td = topd[b, i]
-            ti = topi[b, i]
-            for j in range(big_w):
-                if not planes_too:
-                    for u in range(bs):
-                        for v in range(bs):
-                            cx[u, v] = xb[big_r + i + u, big_r + j + v]
-                            if use_t:
-                                ct[u, v] = tb[big_r + i + u, big_r + j + v]
-                            for c in range(cp.shape[1]):
-                                cc[c, u, v] = cb[c, big_r + i + u, big_r + j + v]
-                for m in range(td.shape[1]):
-                    td[j, m] = np.inf
-                    ti[j, m] = _ID_NONE
-                for src in range(5 if reach > 0 else 1):
-                    ni, nj = i, j
-                    if src == 1:
-                        ni = i - reach
-                    elif src == 2:
-                        ni = i + reach
-                    elif src == 3:
-                        nj = j - reach
-                    elif src == 4:
-                        nj = j + reach
-                    if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
-                        continue
-                    for m in range(kp):
-                        flat = pb[m, ni, nj]
-                        dy = flat // big_w - ni
-                        dx = flat % big_w - nj
-                        oid = (dy + big_r) * s + dx + big_r
-                        if oid == centre and not include_self:
-                            continue
-                        if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
-                            continue
-                        if src > 0 and _listed(oid, ti, j):
-                            continue
-                        if planes_too:
-                            d = planes[oid, i - h0, j]
-                        else:
-                            d = _block_distance(cx, ct, cc, xb, tb, cb, use_t, big_r + i + dy, big_r + j + dx, bs,
-                                                crho, inb)
-                        _offer(d, oid, td, ti, j)
+        oids = np.empty(prev.shape[1], np.int64)
+        for j in range(big_w):
+            for u in range(bs):
+                for v in range(bs):
+                    cx[u, v] = xb[big_r + i + u, big_r + j + v]
+                    if use_t:
+                        ct[u, v] = tb[big_r + i + u, big_r + j + v]
+                    for c in range(cp.shape[1]):
+                        cc[c, u, v] = cb[c, big_r + i + u, big_r + j + v]
+            for m in range(td.shape[1]):
+                td[j, m] = np.inf
+                ti[j, m] = _ID_NONE
+            for src in range(5 if reach > 0 else 1):
+                for q in range(_candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oids)):
+                    oid = oids[q]
+                    d = _block_distance(cx, ct, cc, xb, tb, cb, use_t, big_r + i + oid // s - big_r,
+                                        big_r + j + oid % s - big_r, bs, crho, inb)
+                    _offer(d, oid, td, ti, j)
+
+
+@njit(cache=True, nogil=True)
+def _refine_band(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi, n, band):
+    """:func:`_refine` for the ``n``-th band of ``band`` rows of the flattened batch, reading each candidate's
+    distance from the band's planes of every offset (:func:`_offset_planes`): the same distances, in float64 as
+    :func:`_block_distance` returns them, compared so with the lists."""
+    s = 2 * big_r + 1
+    nbands = (big_h + band - 1) // band
+    b = n // nbands
+    h0 = (n % nbands) * band
+    h1 = min(big_h, h0 + band)
+    planes = np.empty((s * s, h1 - h0, big_w), np.float64)
+    _offset_planes(xp[b], tp[b], cp[b], use_t, big_h, big_w, r, big_r, include_self, consts[b, 0], consts[b, 1], h0,
+                   h1, planes)
+    pb = prev[b]
+    oids = np.empty(prev.shape[1], np.int64)
+    for i in range(h0, h1):
+        td = topd[b, i]
+        ti = topi[b, i]
+        pl = planes[:, i - h0]
+        for j in range(big_w):
+            for m in range(td.shape[1]):
+                td[j, m] = np.inf
+                ti[j, m] = _ID_NONE
+            for src in range(5 if reach > 0 else 1):
+                for q in range(_candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oids)):
+                    _offer(pl[oids[q], j], oids[q], td, ti, j)
 
 
 def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
@@ -252,8 +296,12 @@ def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / (nc * nb), 1.0 / nb] for rb in rho.detach().cpu().double().tolist()], dtype=xp.dtype)
     kernel_threads()
-    _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi,
-            _BAND_ROWS, search_window <= _PLANES_UP_TO)
+    if search_window <= _PLANES_UP_TO:  # bands of rows on torch's threads (the kernel releases the GIL)
+        bands = bsz * -(-h // _BAND_ROWS)
+        run_tasks(lambda n: _refine_band(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self),
+                                         consts, topd, topi, n, _BAND_ROWS), bands)
+    else:
+        _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi)
     if lattice > 0:
         search(planes, h, w, block_size, search_window, rho, include_self, None, lattice, topd, topi, True)
     dist, index = finalize(topd, topi, search_window)
