@@ -5,8 +5,8 @@
 ``--tier`` picks the speed tier by name (``fast``, ``default`` or ``best``; ``DepthRestorer.from_preset``,
 docs/speed.md); ``--pretrained NAME`` a shipped model instead (``DepthRestorer.from_pretrained``, e.g. ``denoise-fast``,
 the fast tier until 2026-12-05). The main process loads the compiled kernels (numba) before the workers start
-(``torch_depth_sr.warmup``, float32: each kernel once on a tiny input; it compiles them on a fresh install): the
-workers, forked from it, start with them instead of each loading them again.
+(``torch_depth_sr.warmup`` with the model: one forward on a small frame, float32, loads the kernels it calls and
+compiles them on a fresh install): the workers, forked from it, start with them instead of each loading them again.
 
 It prints two rates: over the whole run with the start-up (the warm-up, the workers' fork, the first frames), and the
 steady rate of an epoch, from the batch by which every worker has delivered its first to the last.
@@ -51,8 +51,8 @@ def main() -> None:
         restore = RestoreDepth(preset=a.tier, keep_input="raw_depth", **overrides)
     ds = SyntheticScenes(n=a.frames, size=tuple(a.size), transform=Compose([Degrade(), restore]))
     t0 = time.perf_counter()  # the time from here includes the warm-up and the workers' start-up
-    if a.workers > 0:  # load every kernel in the main process, so that the workers, forked from it, inherit them
-        warmup(dtypes=(torch.float32,))  # instead of each loading them from numba's cache
+    if a.workers > 0:  # load the model's kernels in the main process, so that the workers, forked from it, inherit
+        warmup(dtypes=(torch.float32,), model=restore.restorer)  # them instead of each loading them from numba's cache
     loader = DataLoader(ds, batch_size=1, num_workers=a.workers)
     n, se_in, se_out, arrived = 0, 0.0, 0.0, []
     for b in loader:

@@ -145,3 +145,47 @@ def test_run_tasks_keeps_the_order_and_raises_a_task_error(threads):
             native.run_tasks(fail, 5)
     finally:
         torch.set_num_threads(old)
+
+
+_MODEL_WARMUP = """
+import torch
+from numba.core import event
+from torch_depth_sr import DepthRestorer
+from torch_depth_sr.datasets.synthetic import make_scene
+from torch_depth_sr.degradations import SensorDegradation
+from torch_depth_sr.native import compiled_signatures
+from torch_depth_sr.warmup import warmup
+
+model = DepthRestorer.from_preset("fast")
+report = warmup(dtypes=(torch.float32,), model=model)
+held = {k for k, v in compiled_signatures().items() if v}
+seen = []
+
+
+class Listen(event.Listener):
+    def on_start(self, ev):
+        seen.append(ev)
+
+    def on_end(self, ev):
+        pass
+
+
+frame = SensorDegradation(seed=1)(make_scene(96, 128, seed=3))
+with event.install_listener("numba:compile", Listen()), torch.no_grad():
+    model(frame["depth"][None], frame["rgb"][None])
+grew = {k for k, v in compiled_signatures().items() if v} - held
+print("|".join([report["steps"][0][1], str(len(held)), str(sorted(grew)), str(len(seen)), str(sorted(held))]))
+"""
+
+
+def test_warmup_with_a_model_loads_what_its_forward_calls(tmp_path):
+    """``warmup(model=...)`` in a fresh process (the shared cache): the model's forward on another frame compiles
+    and loads nothing more, and the stream's kernels, which the forward never calls, are not loaded."""
+    script = tmp_path / "model_warmup.py"
+    script.write_text(_MODEL_WARMUP)
+    env = {k: v for k, v in os.environ.items() if k != "TORCH_DEPTH_SR_NO_NUMBA"}
+    out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-2000:]
+    label, held, grew, compiled, names = out.stdout.strip().splitlines()[-1].split("|")
+    assert label == "model forward" and int(held) > 0 and grew == "[]" and compiled == "0", out.stdout
+    assert "singular_kernel._pixels" in names and "stream.change_kernel" not in names, names

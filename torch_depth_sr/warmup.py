@@ -81,13 +81,32 @@ def _warmup_steps(dtype: torch.dtype):
             ("stream means", stream_means), ("stream change test", stream_change)]
 
 
+def _model_steps(model: torch.nn.Module, dtype: torch.dtype):
+    """``(label, call)``: one denoising forward of ``model`` on a small synthetic sensor frame in ``dtype``."""
+    from .datasets.synthetic import make_scene
+    from .degradations import SensorDegradation
+
+    frame = SensorDegradation(seed=0)(make_scene(48, 64, seed=0))
+
+    def forward():
+        with torch.no_grad():
+            model(frame["depth"][None].to(dtype), frame["rgb"][None].to(dtype))
+
+    return [("model forward", forward)]
+
+
 def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),
-           log: Optional[Callable[[str], None]] = None) -> dict:
+           log: Optional[Callable[[str], None]] = None, model: Optional[torch.nn.Module] = None) -> dict:
     """Compile every numba CPU kernel the forward can call, for each dtype, into numba's on-disk cache (or load it
     from there when an earlier run did): after it a forward compiles nothing. Idempotent; a second run only loads.
 
     Each kernel runs once on a small input with one thread (the serial paths) and with two (the parallel paths;
     one where numba has a single thread). ``log`` receives one line per step.
+
+    With ``model`` (a :class:`~torch_depth_sr.DepthRestorer`), only the kernels that model's denoising forward calls
+    are compiled or loaded, for each dtype: it runs once, without gradient, on a small synthetic sensor frame (holes,
+    flying pixels, depth edges). For a DataLoader's main process before its workers fork: they inherit what is
+    loaded, and a model that calls a few of the kernels loads only those (``examples/restore_in_dataloader.py``).
 
     Returns:
         ``{"compiled": n, "loaded": n, "seconds": s, "cache": path, "steps": [(dtype, label, compiled, loaded, s),
@@ -121,7 +140,7 @@ def warmup(dtypes: Sequence[torch.dtype] = (torch.float32, torch.float64),
     try:
         with event.install_listener("numba:compile", _Count()):
             for dt in dtypes:
-                for label, call in _warmup_steps(dt):
+                for label, call in (_warmup_steps(dt) if model is None else _model_steps(model, dt)):
                     n0, h0, s0 = _Count.n, loaded(), time.perf_counter()
                     for n in (max(2, threads), 1):
                         torch.set_num_threads(n)
