@@ -21,7 +21,8 @@ from typing import Optional
 
 import numpy as np
 import torch
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from ..native import run_range, run_tasks
 from ._common import offset_order, symmetric_order
@@ -217,6 +218,70 @@ def _listed_key(o, keys, j):
     return False
 
 
+# ---- which lists a band runs, chosen when numba types _band's ``keys`` (None, or an array): only that way is compiled
+def _lists_pack(rd, ri, keys):
+    """The lists as keys when ``keys`` is an array (:func:`_pack`); nothing when None. Compiled code only."""
+    raise NotImplementedError
+
+
+def _lists_unpack(keys, rd, ri):
+    """:func:`_unpack` when ``keys`` is an array; nothing when None. Compiled code only."""
+    raise NotImplementedError
+
+
+def _lists_offer(dd, high, j0, j1, a0, oid, rd, ri, keys, row, seeded):
+    """Offer row ``row``'s lists the distances ``dd[j0:j1]`` with offset id ``oid`` (:func:`_offer_row`), or, with
+    keys, the keys ``high[j] | oid`` (:func:`_offer_keys`; ``high`` filled by :func:`_lists_high`)."""
+    raise NotImplementedError
+
+
+def _lists_high(dd, high, j0, j1, keys):
+    """With keys, ``high[j0:j1]`` = the distances' bits shifted into the keys' high halves; else nothing."""
+    raise NotImplementedError
+
+
+def _keyed(keys) -> bool:
+    return not isinstance(keys, (types.NoneType, types.Omitted))
+
+
+@overload(_lists_pack)
+def _ol_lists_pack(rd, ri, keys):
+    if _keyed(keys):
+        return lambda rd, ri, keys: _pack(rd, ri, keys)
+    return lambda rd, ri, keys: None
+
+
+@overload(_lists_unpack)
+def _ol_lists_unpack(keys, rd, ri):
+    if _keyed(keys):
+        return lambda keys, rd, ri: _unpack(keys, rd, ri)
+    return lambda keys, rd, ri: None
+
+
+@overload(_lists_offer)
+def _ol_lists_offer(dd, high, j0, j1, a0, oid, rd, ri, keys, row, seeded):
+    if _keyed(keys):
+        def offer_keys(dd, high, j0, j1, a0, oid, rd, ri, keys, row, seeded):
+            _offer_keys(high, j0, j1, a0, np.int64(oid), keys[row], seeded)
+        return offer_keys
+
+    def offer_pairs(dd, high, j0, j1, a0, oid, rd, ri, keys, row, seeded):
+        _offer_row(dd, j0, j1, a0, np.int32(oid), rd[row], ri[row], seeded)
+    return offer_pairs
+
+
+@overload(_lists_high)
+def _ol_lists_high(dd, high, j0, j1, keys):
+    if _keyed(keys):
+        def fill(dd, high, j0, j1, keys):
+            bits = dd.view(np.uint32)[j0:j1]
+            hv = high[j0:j1]
+            for j in range(j1 - j0):
+                hv[j] = np.uint64(bits[j]) << _HIGH
+        return fill
+    return lambda dd, high, j0, j1, keys: None
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
 def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded, dist, index,
           keys):
@@ -224,7 +289,7 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
     read when ``seeded`` and written at the end, unless ``dist`` and ``index`` (k, H, W) are not empty: then the band
     writes its rows of the final distances and flat indices there instead (what :func:`_finalize` would make).
     ``keys``: None, or for float32 planes a (h1-h0, k, W) uint64 array in which the lists run as packed keys
-    (numba compiles only the branch the argument's type selects).
+    (the ``_lists_*`` overloads: numba compiles only the way the argument's type selects).
 
     ``xp, tp`` (Hp, Wp) and ``cp`` (C, Hp, Wp): planes replicate-padded by r, then zero-padded by R.
     ``consts`` = (ρ/C, ρ/(C·b²), 1/b²) in the planes' dtype, so that float32 stays float32 (SIMD width).
@@ -252,8 +317,7 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
                 rd[a, m, j] = topd[a, j, m] if seeded else np.inf
                 ri[a, m, j] = topi[a, j, m] if seeded else _ID_NONE
     high = np.zeros(big_w, dtype=np.uint64)  # a row's distances as the high halves of keys
-    if keys is not None:
-        _pack(rd, ri, keys)
+    _lists_pack(rd, ri, keys)
     for io in range(order.shape[0]):
         oid = order[io]
         dy = oid // s - big_r
@@ -349,22 +413,12 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
             for j in range(nj):
                 if not ddv[j] > zero:
                     ddv[j] = zero
-            if keys is None:
-                if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
-                    _offer_row(dd, j0, j1, j0, np.int32(oid), rd[i - h0], ri[i - h0], seeded)
-                if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
-                    _offer_row(dd, j0, j1, j0 + dx, np.int32(mid), rd[i + dy - h0], ri[i + dy - h0], seeded)
-            else:
-                bits = dd.view(np.uint32)[j0:j1]
-                hv = high[j0:j1]
-                for j in range(nj):
-                    hv[j] = np.uint64(bits[j]) << _HIGH
-                if i >= f0 and i < f1:
-                    _offer_keys(high, j0, j1, j0, oid, keys[i - h0], seeded)
-                if i >= m0 and i < m1:
-                    _offer_keys(high, j0, j1, j0 + dx, mid, keys[i + dy - h0], seeded)
-    if keys is not None:
-        _unpack(keys, rd, ri)
+            _lists_high(dd, high, j0, j1, keys)
+            if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
+                _lists_offer(dd, high, j0, j1, j0, np.int64(oid), rd, ri, keys, i - h0, seeded)
+            if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
+                _lists_offer(dd, high, j0, j1, j0 + dx, mid, rd, ri, keys, i + dy - h0, seeded)
+    _lists_unpack(keys, rd, ri)
     if dist.size > 0:
         for a in range(h1 - h0):
             i = h0 + a
