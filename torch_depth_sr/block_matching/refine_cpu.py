@@ -15,12 +15,12 @@ import numpy as np
 import torch
 from numba import njit, prange
 
-from ..native import kernel_threads
+from ..native import kernel_threads, run_tasks
 from .cpu_exact import _ID_NONE, finalize, padded_planes, search
 
 __all__ = ["refine_cpu"]
 
-_BAND_ROWS = 16  # rows per band of the re-ranking from planes
+_BAND_ROWS = 16  # rows per task of the re-ranking
 # windows up to this side compute every offset's distance for every pixel (vector loops) rather than each candidate's
 # alone: at 7×7 (48 offsets, 24 by symmetry, for 10 candidates) 640×480, one thread: 200-217 -> 110-125 ms; a 21×21
 # window has 440 offsets for the same 10 candidates
@@ -144,8 +144,8 @@ def _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, out,
 def _offset_planes(xb, tb, cb, use_t, big_h, big_w, r, big_r, include_self, crho, inb, h0, h1, planes):
     """``planes[o, i - h0, j]`` = the distance of pixel ``(i, j)`` to its candidate at offset ``o``, for the rows
     ``[h0, h1)`` and every offset ``o`` of the window whose candidate lies in the image (other entries unwritten).
-    A function of its own, called from :func:`_refine_planes`'s parallel loop: in its body numba would turn each slice
-    copy into a parallel loop of its own and compile for seconds longer."""
+    A function of its own, not part of :func:`_refine`'s parallel loop, where numba would turn each slice copy into a
+    parallel loop of its own and compile for seconds longer."""
     s = 2 * big_r + 1
     centre = big_r * s + big_r
     num = np.empty(big_w, xb.dtype)
@@ -253,33 +253,32 @@ def _refine(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self
                     _offer(d, oid, td, ti, j)
 
 
-@njit(cache=True, parallel=True)
-def _refine_planes(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi, band):
-    """:func:`_refine` with each candidate's distance read from its band's planes of every offset
-    (:func:`_offset_planes`): the same distances, in float64 as :func:`_block_distance` returns them, compared so
-    with the lists. A parallel loop over bands of ``band`` rows, as :func:`_refine` (its body gets noalias arrays)."""
-    bsz = xp.shape[0]
+@njit(cache=True, nogil=True)
+def _refine_band(xp, tp, cp, use_t, big_h, big_w, r, big_r, prev, reach, include_self, consts, topd, topi, n, band):
+    """:func:`_refine` for the ``n``-th band of ``band`` rows of the flattened batch, reading each candidate's
+    distance from the band's planes of every offset (:func:`_offset_planes`): the same distances, in float64 as
+    :func:`_block_distance` returns them, compared so with the lists."""
     s = 2 * big_r + 1
     nbands = (big_h + band - 1) // band
-    for n in prange(bsz * nbands):
-        b = n // nbands
-        h0 = (n % nbands) * band
-        h1 = min(big_h, h0 + band)
-        planes = np.empty((s * s, h1 - h0, big_w), np.float64)
-        _offset_planes(xp[b], tp[b], cp[b], use_t, big_h, big_w, r, big_r, include_self, consts[b, 0], consts[b, 1],
-                       h0, h1, planes)
-        pb = prev[b]
-        oids = np.empty(prev.shape[1], np.int64)
-        for i in range(h0, h1):
-            td = topd[b, i]
-            ti = topi[b, i]
-            for j in range(big_w):
-                for m in range(td.shape[1]):
-                    td[j, m] = np.inf
-                    ti[j, m] = _ID_NONE
-                for src in range(5 if reach > 0 else 1):
-                    for q in range(_candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oids)):
-                        _offer(planes[oids[q], i - h0, j], oids[q], td, ti, j)
+    b = n // nbands
+    h0 = (n % nbands) * band
+    h1 = min(big_h, h0 + band)
+    planes = np.empty((s * s, h1 - h0, big_w), np.float64)
+    _offset_planes(xp[b], tp[b], cp[b], use_t, big_h, big_w, r, big_r, include_self, consts[b, 0], consts[b, 1], h0,
+                   h1, planes)
+    pb = prev[b]
+    oids = np.empty(prev.shape[1], np.int64)
+    for i in range(h0, h1):
+        td = topd[b, i]
+        ti = topi[b, i]
+        pl = planes[:, i - h0]
+        for j in range(big_w):
+            for m in range(td.shape[1]):
+                td[j, m] = np.inf
+                ti[j, m] = _ID_NONE
+            for src in range(5 if reach > 0 else 1):
+                for q in range(_candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oids)):
+                    _offer(pl[oids[q], j], oids[q], td, ti, j)
 
 
 def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
@@ -297,9 +296,10 @@ def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / (nc * nb), 1.0 / nb] for rb in rho.detach().cpu().double().tolist()], dtype=xp.dtype)
     kernel_threads()
-    if search_window <= _PLANES_UP_TO:
-        _refine_planes(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi,
-                       _BAND_ROWS)
+    if search_window <= _PLANES_UP_TO:  # bands of rows on torch's threads (the kernel releases the GIL)
+        bands = bsz * -(-h // _BAND_ROWS)
+        run_tasks(lambda n: _refine_band(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self),
+                                         consts, topd, topi, n, _BAND_ROWS), bands)
     else:
         _refine(xp, tp, cp, use_t, h, w, r, big_r, prev, int(reach), bool(include_self), consts, topd, topi)
     if lattice > 0:
