@@ -165,8 +165,8 @@ class TestBlockMatchContract:
 
     @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
     def test_many_exact_ties_rank_as_the_reference(self, dtype):
-        """Small integer depths: many distances are equal, and equal sums are equal means in either dtype, so the order
-        of the lists (float32's packed keys, float64's pairs), ties to the smaller offset, is the reference's exactly."""
+        """Small integer depths: many distances are equal, and equal sums are equal means in either dtype, so the
+        order of the lists (float32's packed keys, float64's pairs), ties to the smaller offset, is the reference's."""
         g = torch.Generator().manual_seed(3)
         x = torch.randint(0, 4, (2, 1, 20, 23), generator=g).to(dtype)
         ref = block_match_reference(x, None, None, block_size=3, search_window=7, k=12)

@@ -163,8 +163,8 @@ def supported_or_line(y: torch.Tensor, observed: torch.Tensor, tol: Union[float,
     neighbours."""
     kernel = host_kernel("singular_kernel", "support_cpu", y.detach())
     if kernel is not None:  # the same tests, one pass over the pixels instead of ~100 over the image
-        obs, _, tol_t = _measured(y, observed, tol)
-        return kernel(y.detach(), obs, tol_t.reshape(-1), support)
+        obs, yv, tol_t = _measured(y.detach(), observed, tol)
+        return kernel(yv, obs, tol_t.reshape(-1), support)
     g = _Agreement(y, observed, tol)
     return (g.count >= support) | _lines(g)
 

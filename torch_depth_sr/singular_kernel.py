@@ -170,11 +170,11 @@ def _support_rule(t0, t1, y, obs, tol, tol2, limits, support, count, out):
 
 
 def support_cpu(y: torch.Tensor, observed: torch.Tensor, tol: torch.Tensor, support: int) -> torch.Tensor:
-    """``singular.supported_or_line`` of CPU float32/float64 tensors: ``y`` (B,1,H,W), ``observed`` (B,1,H,W) bool
-    (measured and finite), ``tol`` (B,) in ``y``'s dtype → (B,1,H,W) bool."""
+    """``singular.supported_or_line`` of CPU float32/float64 tensors: ``y`` (B,1,H,W) with 0 where not measured,
+    ``observed`` (B,1,H,W) bool (measured and finite), ``tol`` (B,) in ``y``'s dtype → (B,1,H,W) bool."""
     b, _, h, w = y.shape
     np_dt = np.float64 if y.dtype == torch.float64 else np.float32
-    yn = as_numpy(torch.where(observed, y, torch.zeros_like(y)), (b, h, w), np_dt)
+    yn = as_numpy(y, (b, h, w), np_dt)
     on = as_numpy(observed, (b, h, w), np.bool_)
     tl = as_numpy(tol, (b,), np_dt)
     tl2 = as_numpy(2 * tol, (b,), np_dt)

@@ -149,24 +149,19 @@ _LOW = np.uint64(0xFFFFFFFF)
 
 @njit(cache=True, nogil=True)
 def _pack(rd, ri, keys):
-    """The lists ``rd`` (float32) and ``ri`` (int32), (rows, k, W), as keys (rows, k, W)."""
-    bits = rd.view(np.uint32)
-    for a in range(rd.shape[0]):
-        for m in range(rd.shape[1]):
-            for j in range(rd.shape[2]):
-                keys[a, m, j] = (np.uint64(bits[a, m, j]) << _HIGH) | np.uint64(np.uint32(ri[a, m, j]))
+    """The lists ``rd`` (float32) and ``ri`` (int32) as ``keys``, each (rows, k, W), C-contiguous."""
+    bits, ids, out = rd.view(np.uint32).ravel(), ri.ravel(), keys.ravel()
+    for t in range(out.shape[0]):
+        out[t] = (np.uint64(bits[t]) << _HIGH) | np.uint64(np.uint32(ids[t]))
 
 
 @njit(cache=True, nogil=True)
 def _unpack(keys, rd, ri):
     """:func:`_pack` undone."""
-    bits = rd.view(np.uint32)
-    for a in range(rd.shape[0]):
-        for m in range(rd.shape[1]):
-            for j in range(rd.shape[2]):
-                key = keys[a, m, j]
-                bits[a, m, j] = np.uint32(key >> _HIGH)
-                ri[a, m, j] = np.int32(key & _LOW)
+    bits, ids, src = rd.view(np.uint32).ravel(), ri.ravel(), keys.ravel()
+    for t in range(src.shape[0]):
+        bits[t] = np.uint32(src[t] >> _HIGH)
+        ids[t] = np.int32(src[t] & _LOW)
 
 
 @njit(cache=True, nogil=True)

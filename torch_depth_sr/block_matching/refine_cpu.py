@@ -22,8 +22,8 @@ __all__ = ["refine_cpu"]
 
 _BAND_ROWS = 16  # rows per task of the re-ranking
 # windows up to this side compute every offset's distance for every pixel (vector loops) rather than each candidate's
-# alone: at 7×7 (48 offsets, 24 by symmetry, for 10 candidates) 640×480, one thread: 200-217 -> 110-125 ms; a 21×21
-# window has 440 offsets for the same 10 candidates
+# alone: at 7×7 (48 offsets, 24 by symmetry, for 10 candidates) 640×480, one thread, refine_matches with its lattice
+# 335-587 -> 237-303 ms; a 21×21 window has 440 offsets for the same 10 candidates
 _PLANES_UP_TO = 9
 
 
@@ -92,8 +92,8 @@ def _block_distance(cx, ct, cc, xp, tp, cp, use_t, yb, xb, bs, crho, inb):
 @njit(cache=True, nogil=True, error_model="numpy")
 def _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, out, num, cnt, col):
     """:func:`_block_distance` of every pixel ``(i, j)`` of row ``i`` whose candidate ``(i + dy, j + dx)`` lies in the
-    image (``dy >= 0``), into ``out[j]``: the same sums in the same order (the block's rows, then columns, then the channels),
-    each a vector loop over the row's pixels."""
+    image (``dy >= 0``), into ``out[j]``: the same sums in the same order (the block's rows, then columns, then the
+    channels), each a vector loop over the row's pixels."""
     bs = 2 * r + 1
     j0 = max(0, -dx)
     j1 = min(big_w, big_w - dx)
@@ -144,8 +144,8 @@ def _distance_row(xb, tb, cb, use_t, big_w, r, big_r, i, dy, dx, crho, inb, out,
 def _offset_planes(xb, tb, cb, use_t, big_h, big_w, r, big_r, include_self, crho, inb, h0, h1, planes):
     """``planes[o, i - h0, j]`` = the distance of pixel ``(i, j)`` to its candidate at offset ``o``, for the rows
     ``[h0, h1)`` and every offset ``o`` of the window whose candidate lies in the image (other entries unwritten).
-    A function of its own, not part of :func:`_refine`'s parallel loop, where numba would turn each slice copy into a
-    parallel loop of its own and compile for seconds longer."""
+    Called from a serial kernel (:func:`_refine_band`): in a parallel loop's body numba turned each slice copy into a
+    parallel loop of its own and compiled 7 s longer per dtype, for 20-30 % less time."""
     s = 2 * big_r + 1
     centre = big_r * s + big_r
     num = np.empty(big_w, xb.dtype)
