@@ -257,8 +257,10 @@ def test_gdsr_source_reads_only_the_2006_fitting_files():
 
 
 def test_shipped_upsampler_treats_each_sample_of_a_batch_on_its_own():
-    """Per-sample range, noise level and bounds: a batch gives what its samples give alone (float64 too)."""
-    model = DepthRestorer.from_pretrained("upsample").eval()
+    """Per-sample range, noise level and bounds: a batch gives what its samples give alone (float64 too). The
+    network in float32 for every input (``"auto"`` would run the float32 input's in bfloat16 on a processor with
+    AMX, and the float64 input's in float32: two arithmetics, not the batch, would differ)."""
+    model = DepthRestorer.from_pretrained("upsample", network_precision="float32").eval()
     scenes = [make_scene(64, 80, seed=s) for s in (1, 2)]
     lows = [Downsample(4, "bicubic")({"depth": s["gt"][None]})["depth"] for s in scenes]
     torch.manual_seed(0)

@@ -7,6 +7,7 @@ import torch
 
 from torch_depth_sr import DepthRestorer
 from torch_depth_sr.config import PRESETS, TIERS, TRAINED_PRESETS, preset_config
+from torch_depth_sr.precision import network_precision
 
 
 @pytest.fixture(scope="module")
@@ -52,10 +53,12 @@ def test_a_trained_tier_takes_overrides_and_trainable():
 @pytest.mark.parametrize("name", TIERS)
 def test_every_tier_takes_float64(name, sample):
     """numpy's default dtype reaches the trained tiers too: a float64 frame runs (the networks in their own float32)
-    and comes back float64, the same restoration as the float32 frame to well under the noise (sigma 3)."""
+    and comes back float64, the same restoration as the float32 frame to well under the noise (sigma 3). Both in
+    float32 networks: ``"auto"`` would run the float32 frame's in bfloat16 on a processor with AMX (the float64
+    frame's stay float32), and this test is about the dtype's path, not that arithmetic (test_golden.py's)."""
     m = DepthRestorer.from_preset(name)
     y, rgb = sample["depth"][None], sample["rgb"][None]
-    with torch.no_grad():
+    with torch.no_grad(), network_precision("float32"):
         single, double = m(y, rgb), m(y.double(), rgb.double())
     assert double.dtype == torch.float64 and torch.isfinite(double).all()
     assert (double - single.double()).abs().median() < 1e-3

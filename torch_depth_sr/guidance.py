@@ -33,6 +33,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .operators import grad
+from .precision import network_autocast, uses_bfloat16
 
 __all__ = ["GuidanceMaps", "GuidanceNet", "MAX_LOG_MULTIPLIER", "NoGuidance", "PreparedGuidance", "STATE_FEATURES",
            "UnitMultipliers"]
@@ -96,6 +97,8 @@ class GuidanceNet(nn.Module):
         num_layers: number of unrolled layers (one output head each).
         channels: feature channels of the convolutions.
         max_multiplier: ``R``, every multiplier lies in ``[1/R, R]`` (``RestorerConfig.guidance_range``).
+        precision: the convolutions' arithmetic (:mod:`torch_depth_sr.precision`: ``"auto"``, ``"float32"`` or
+            ``"bfloat16"``).
 
     Examples:
         >>> net = GuidanceNet(num_layers=2, channels=8)
@@ -109,15 +112,17 @@ class GuidanceNet(nn.Module):
 
     outputs = 5  # tv (2 directions), nonlocal (2 directions), outlier
 
-    def __init__(self, num_layers: int, channels: int = 16, max_multiplier: float = 4.0):
+    def __init__(self, num_layers: int, channels: int = 16, max_multiplier: float = 4.0, precision: str = "auto"):
         super().__init__()
+        self.precision = precision
         if num_layers < 1 or channels < 1:
             raise ValueError(f"GuidanceNet needs num_layers >= 1 and channels >= 1; got {num_layers}, {channels}.")
         if not (math.isfinite(max_multiplier) and max_multiplier >= 1):
             raise ValueError(f"GuidanceNet needs a finite max_multiplier >= 1; got {max_multiplier}.")
         self.max_log_multiplier = math.log(max_multiplier)  # c: log-multipliers are c·tanh(r)
         c = channels
-        self.guide = nn.Sequential(_conv(3, c, 3), nn.ReLU(), _conv(c, c, 3), nn.ReLU())
+        # in-place ReLUs: the same values without a new plane each (autograd keeps the output it needs)
+        self.guide = nn.Sequential(_conv(3, c, 3), nn.ReLU(inplace=True), _conv(c, c, 3), nn.ReLU(inplace=True))
         self.state = _conv(STATE_FEATURES, c, 3)
         self.mix = _conv(c, c, 3)
         self.heads = nn.ModuleList(nn.Conv2d(c, self.outputs, 1) for _ in range(num_layers))
@@ -154,8 +159,8 @@ class GuidanceNet(nn.Module):
     def raw(self, index: int, guide_features: torch.Tensor, state_features: torch.Tensor) -> torch.Tensor:
         """The head's output ``r (B,5,H,W)`` of layer ``index`` (the log-multipliers are ``c·tanh(r)``)."""
         state = state_features.to(guide_features.dtype).contiguous(memory_format=torch.channels_last)
-        h = F.relu(guide_features + self.state(state))
-        h = F.relu(self.mix(h))  # (B,C,H,W)
+        h = F.relu(guide_features + self.state(state), inplace=True)
+        h = F.relu(self.mix(h), inplace=True)  # (B,C,H,W)
         return self.heads[index](h).contiguous()
 
     def prepare(self, rgb: Optional[torch.Tensor], like: Optional[torch.Tensor] = None) -> "PreparedGuidance":
@@ -164,7 +169,9 @@ class GuidanceNet(nn.Module):
             if rgb is None:
                 raise ValueError("GuidanceNet.prepare needs rgb or a depth-shaped tensor `like`.")
             like = rgb[:, :1]
-        return PreparedGuidance(self, self.encode_guide(rgb, like))
+        bf16 = uses_bfloat16(self.precision, self, like, *(() if rgb is None else (rgb,)))
+        with network_autocast(bf16, like.device):
+            return PreparedGuidance(self, self.encode_guide(rgb, like), bf16)
 
     def extra_repr(self) -> str:
         return (f"layers={len(self.heads)}, parameters={sum(p.numel() for p in self.parameters())}, "
@@ -174,8 +181,8 @@ class GuidanceNet(nn.Module):
 class PreparedGuidance:
     """A :class:`GuidanceNet` with the colour features of one forward (what the layers receive)."""
 
-    def __init__(self, net: GuidanceNet, guide_features: torch.Tensor):
-        self.net, self.guide_features = net, guide_features
+    def __init__(self, net: GuidanceNet, guide_features: torch.Tensor, bfloat16: bool = False):
+        self.net, self.guide_features, self.bfloat16 = net, guide_features, bfloat16
 
     def maps(self, index: int, x: torch.Tensor, q: torch.Tensor, residual: torch.Tensor,
              observed: Optional[torch.Tensor] = None) -> GuidanceMaps:
@@ -185,7 +192,11 @@ class PreparedGuidance:
         if observed is not None:
             residual = residual * observed
         feats = self.net.state_features(x, q, residual)
-        log_m = self.net.max_log_multiplier * torch.tanh(self.net.raw(index, self.guide_features, feats))  # (B,5,H,W)
+        with network_autocast(self.bfloat16, x.device):
+            r = self.net.raw(index, self.guide_features, feats)
+        if r.dtype == torch.bfloat16:  # the multipliers from the float32 value of the head's output
+            r = r.float()
+        log_m = self.net.max_log_multiplier * torch.tanh(r)  # (B,5,H,W)
         log_m = log_m.to(x.dtype)
         log_gamma = log_m[:, 4:5]
         s = x.shape[-1] // q.shape[-1]

@@ -117,13 +117,14 @@ class DepthRestorer(nn.Module):
         # per-pixel multipliers of the layers' thresholds (issue 14); None = the scalar model (no state-dict keys)
         self.guidance: Optional[GuidanceNet] = None
         if config.guidance is not None:
-            self.guidance = GuidanceNet(config.num_layers, config.guidance.channels,
-                                        config.guidance.range).requires_grad_(trainable)
+            self.guidance = GuidanceNet(config.num_layers, config.guidance.channels, config.guidance.range,
+                                        config.network_precision).requires_grad_(trainable)
         # the learned, clamped correction at depth edges, for the task it was trained for (issue 14); None = no
         # state-dict keys. Its step in ``post`` holds it; the parameters keep the key ``refiner.*``.
         self.refiner: Optional[EdgeRefiner] = None
         if config.refiner is not None:
-            self.refiner = EdgeRefiner(config.refiner.channels, config.refiner.layers).requires_grad_(trainable)
+            self.refiner = EdgeRefiner(config.refiner.channels, config.refiner.layers,
+                                       config.network_precision).requires_grad_(trainable)
         self.post = post_steps(config, self.refiner)
         self._register_load_state_dict_pre_hook(_rename_legacy_keys)
 

@@ -37,6 +37,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .band import clamp_between
+from .precision import network_autocast, uses_bfloat16
 from .window_max import max_filter, min_filter
 
 __all__ = ["EdgeRefiner", "REFINER_FEATURES"]
@@ -53,6 +54,8 @@ class EdgeRefiner(nn.Module):
     Args:
         channels: width of the hidden layers.
         layers: number of hidden 3×3 convolutions (after the first).
+        precision: the convolutions' arithmetic (:mod:`torch_depth_sr.precision`: ``"auto"``, ``"float32"`` or
+            ``"bfloat16"``).
 
     Examples:
         >>> ref = EdgeRefiner(channels=8, layers=1)
@@ -62,11 +65,13 @@ class EdgeRefiner(nn.Module):
         True
     """
 
-    def __init__(self, channels: int = 32, layers: int = 6) -> None:
+    def __init__(self, channels: int = 32, layers: int = 6, precision: str = "auto") -> None:
         super().__init__()
-        body: list[nn.Module] = [nn.Conv2d(REFINER_FEATURES, channels, 3, padding=1), nn.ReLU()]
+        self.precision = precision
+        # in-place ReLUs: the same values without a new plane per layer (autograd keeps the output it needs)
+        body: list[nn.Module] = [nn.Conv2d(REFINER_FEATURES, channels, 3, padding=1), nn.ReLU(inplace=True)]
         for _ in range(layers):
-            body += [nn.Conv2d(channels, channels, 3, padding=1), nn.ReLU()]
+            body += [nn.Conv2d(channels, channels, 3, padding=1), nn.ReLU(inplace=True)]
         body.append(nn.Conv2d(channels, 1, 3, padding=1))
         nn.init.zeros_(body[-1].weight)
         nn.init.zeros_(body[-1].bias)
@@ -105,8 +110,11 @@ class EdgeRefiner(nn.Module):
         """``x`` plus the network's step (in units of ``unit``), clamped to ``[lo, hi]``."""
         # channels-last: on the CPU oneDNN's kernels for these thin layers take half the time of the default layout
         # (the same sums in another order: the step within float rounding)
+        bf16 = uses_bfloat16(self.precision, self, x, phi)
         phi = phi.to(self.body[0].weight.dtype).contiguous(memory_format=torch.channels_last)
-        step = self.body(phi).to(x.dtype) * unit
+        with network_autocast(bf16, phi.device):
+            step = self.body(phi)
+        step = step.to(x.dtype) * unit
         return clamp_between(x + step, lo, hi)
 
     def forward(self, x: torch.Tensor, lowres: torch.Tensor, rgb: torch.Tensor,

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Optional
 
 from ..errors import ModelFileError, ParameterError
+from ..precision import NETWORK_PRECISIONS
 from .domains import choice, integer, str_tuple
 from .version1 import FLAT_FIELDS, version1_settings
 from .groups import (BlockMatchingConfig, CleanSamples, EdgeRefit, EdgeSnap, FidelityBand, Group, Guidance,
@@ -27,8 +28,10 @@ the nonlocal gradient prior η‖Dx − α‖₁, the sparse outliers γ‖e‖�
 class RestorerConfig:
     """Every setting of :class:`~torch_depth_sr.DepthRestorer`, JSON-serialisable (version 2).
 
-    Top level: ``num_layers``, the ``degradation`` K of guided upsampling (``"area"`` or ``"bicubic"``) and the
-    ``terms`` of the objective (:data:`TERMS`); then one group per part of the model. Groups typed ``Optional`` are
+    Top level: ``num_layers``, the ``degradation`` K of guided upsampling (``"area"`` or ``"bicubic"``), the
+    ``terms`` of the objective (:data:`TERMS`) and the arithmetic of the networks, ``network_precision``
+    (:mod:`torch_depth_sr.precision`: ``"auto"``, ``"float32"`` or ``"bfloat16"``); then one group per part of the
+    model. Groups typed ``Optional`` are
     steps that may be off (``None``).
 
     :meth:`replace` changes top-level fields; a group is given as a group, as a dict of the fields to change, or as
@@ -45,6 +48,7 @@ class RestorerConfig:
     num_layers: int = 8
     degradation: str = "area"
     terms: tuple = TERMS
+    network_precision: str = "auto"
     weights: LayerWeights = field(default_factory=LayerWeights)
     block_matching: BlockMatchingConfig = field(default_factory=BlockMatchingConfig)
     singular: SingularConfig = field(default_factory=SingularConfig)
@@ -70,6 +74,7 @@ class RestorerConfig:
         integer(1)("num_layers", self.num_layers)
         choice("area", "bicubic")("degradation", self.degradation)
         str_tuple(*TERMS)("terms", self.terms)
+        choice(*NETWORK_PRECISIONS)("network_precision", self.network_precision)
         for name, kind in _GROUPS.items():
             v = getattr(self, name)
             if isinstance(v, dict):
@@ -132,9 +137,9 @@ class RestorerConfig:
 
 
 _GROUPS: dict = {f.name: t for f, t in zip(dataclasses.fields(RestorerConfig), (
-    None, None, None, LayerWeights, BlockMatchingConfig, SingularConfig, SolverConfig, InitConfig, UpsamplingConfig,
-    SidedFill, ValuePrior, CleanSamples, GuidedPrior, FidelityBand, OutputHold, EdgeSnap, EdgeRefit, Guidance,
-    Refiner, StreamConfig)) if t is not None}
+    None, None, None, None, LayerWeights, BlockMatchingConfig, SingularConfig, SolverConfig, InitConfig,
+    UpsamplingConfig, SidedFill, ValuePrior, CleanSamples, GuidedPrior, FidelityBand, OutputHold, EdgeSnap, EdgeRefit,
+    Guidance, Refiner, StreamConfig)) if t is not None}
 _OPTIONAL = {"sided_fill", "value_prior", "clean_samples", "guided_prior", "fidelity", "upsample_hold", "edge_snap",
              "edge_refit", "guidance", "refiner", "stream"}
 _TOP_LEVEL = {"num_layers", "degradation"}

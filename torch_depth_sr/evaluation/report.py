@@ -9,6 +9,8 @@ from pathlib import Path
 
 import torch
 
+from ..precision import native_bfloat16
+
 __all__ = ["metadata", "print_table"]
 
 
@@ -27,6 +29,8 @@ def metadata(device: str = "cpu") -> dict:
     return {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "commit": commit,
             "torch": torch.__version__, "kornia": kornia.__version__, "python": platform.python_version(),
             "device": device, "threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine(),
+            # what network_precision="auto" runs the models' networks in on this device (torch_depth_sr.precision)
+            "auto_networks": "bfloat16" if native_bfloat16(torch.device(device)) else "float32",
             **_gpu_metadata(device)}
 
 

@@ -39,6 +39,7 @@ from torch import nn
 from ..config import RestorerConfig, apply_overrides
 from ..model import DepthRestorer
 from ..post_steps import post_steps
+from ..precision import network_precision
 from ..refiner import EdgeRefiner
 from ..transforms import Downsample
 from .datasets import middlebury_records
@@ -299,6 +300,7 @@ def _export(base: DepthRestorer, refiner: EdgeRefiner, cfg: RefinerConfig, folde
     model.save(folder)
 
 
+@network_precision("float32")  # as the shipped networks were trained, on any machine
 def train_refiner(cfg: RefinerConfig) -> EdgeRefiner:
     """Compute the frozen model's outputs, train the refiner on crops of them, export the best by validation."""
     torch.set_num_threads(max(1, cfg.threads))
@@ -363,6 +365,7 @@ def _settings(config: RestorerConfig) -> dict:
     return out
 
 
+@network_precision("float32")  # as the shipped networks were trained, on any machine
 def evaluate_refiners(cfg: RefinerConfig, models: list[str]) -> list[dict]:
     """The validation figures of saved models (folders or pretrained names, each with a refiner for ``cfg.task``) on
     the validation samples of ``cfg`` (its scenes, degradations and ``upscale``): one row per model and group (all,

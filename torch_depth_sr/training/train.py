@@ -35,6 +35,7 @@ from torch.utils.data import DataLoader, Dataset, Sampler
 
 from ..config import RestorerConfig, apply_overrides
 from ..model import DepthRestorer
+from ..precision import network_precision
 from .datasets import make_datasets
 
 
@@ -201,6 +202,7 @@ def _param_groups(model: DepthRestorer, cfg: TrainConfig) -> list[dict]:
     return groups
 
 
+@network_precision("float32")  # as the shipped networks were trained, on any machine
 def train(cfg: TrainConfig) -> DepthRestorer:
     """Train per ``cfg``; returns the trained (unwrapped) model. See the module docstring."""
     torch.set_num_threads(max(1, cfg.threads))
