@@ -6,6 +6,9 @@ process, 15 rounds (min and median, ms). Run with the patch applied, then revert
     git apply docs/measurements/issue27-tiers/thirteenth-stop/refine_rows_not_kept.patch
     python docs/measurements/issue27-tiers/thirteenth-stop/time_refine_rows.py 1   # torch threads
     git apply -R docs/measurements/issue27-tiers/thirteenth-stop/refine_rows_not_kept.patch
+
+It runs on the code it was written for (``git checkout f4ae940`` first): the fifteenth stop changed ``_refine``'s
+arguments and the patch no longer applies.
 """
 import torch, time, numpy as np, sys
 torch.set_num_threads(int(sys.argv[1]))
