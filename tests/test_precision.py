@@ -70,3 +70,17 @@ def test_bfloat16_runs_the_convolutions_only():
         ref16.body[-1].weight.zero_()
         ref16.body[-1].bias.zero_()
         assert torch.equal(ref16(x, lowres, rgb), torch.minimum(torch.maximum(x, lo), hi))
+
+
+def test_the_environment_variable_overrides_the_setting_below_a_block(monkeypatch):
+    from torch_depth_sr.precision import ENVIRONMENT_VARIABLE
+
+    net = _trained_refiner("auto")
+    x = torch.zeros(1, 1, 4, 4, dtype=torch.float64)
+    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "bfloat16")
+    assert uses_bfloat16("float32", net, x) is True
+    with network_precision("float32"):
+        assert uses_bfloat16("auto", net, x) is False
+    monkeypatch.setenv(ENVIRONMENT_VARIABLE, "fp16")
+    with pytest.raises(ValueError, match="TORCH_DEPTH_SR_NETWORK_PRECISION='fp16'; allowed are auto, float32"):
+        uses_bfloat16("auto", net, x)

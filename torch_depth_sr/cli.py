@@ -3,14 +3,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
-from typing import Optional, Sequence
+from contextlib import contextmanager
+from typing import Iterator, Optional, Sequence
 from pathlib import Path
 
 import torch
 
 from .evaluation.report import metadata as _metadata, print_table as _print_table
+from .precision import ENVIRONMENT_VARIABLE, NETWORK_PRECISIONS
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -191,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     named.add_argument("--pretrained", default=None,
                        help="name of shipped parameters (see DepthRestorer.from_pretrained)")
     r.add_argument("--workers", type=_non_negative_int, default=0, help="DataLoader workers for folders")
+    _add_network_precision(r)
     r.set_defaults(func=cmd_restore)
     # ---- issue 28: restore --recordings ROOT OUT (torch_depth_sr/recordings/cli.py) ----
     from .recordings.cli import add_recordings_arguments
@@ -236,6 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--pretrained", default=None, metavar="FOLDER",
                    help="methods trained, trained-refined, trained-x4, trained-upsample(-area) (gdsr: trained) load "
                         "this saved model folder (e.g. runs/x/best) instead of the shipped parameters")
+    _add_network_precision(b)
     b.set_defaults(func=cmd_bench)
 
     wu = sub.add_parser("warmup", help="compile the numba CPU kernels now (once per install; make install runs it)",
@@ -264,7 +269,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return e.code if isinstance(e.code, int) else 2
     try:
         _check_device(getattr(args, "device", None))
-        return args.func(args)
+        with _network_precision_of(args):
+            return args.func(args)
     except KeyboardInterrupt:
         if args.debug:
             raise
@@ -287,6 +293,32 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 from .errors import describe_error, single_line as _single_line  # noqa: E402  (one home: errors.py)
 
 __all__ = ["cmd_demo", "RESTORE_HELP", "cmd_restore", "cmd_bench", "cmd_warmup", "build_parser", "main"]
+
+
+def _add_network_precision(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--network-precision", choices=NETWORK_PRECISIONS, default=None,
+                   help="the arithmetic of the models' networks (torch_depth_sr.precision): auto (bfloat16 on a CPU "
+                        "with AMX or AVX512-BF16, else float32; the default), float32 (the same numbers on every "
+                        "machine) or bfloat16; passed to every worker process and torchrun rank")
+
+
+@contextmanager
+def _network_precision_of(args: argparse.Namespace) -> Iterator[None]:
+    """``--network-precision`` as the environment variable the library reads, for this command and the processes it
+    starts (spawned workers do not inherit a ``network_precision`` block); the environment as it was afterwards."""
+    value = getattr(args, "network_precision", None)
+    if value is None:
+        yield
+        return
+    before = os.environ.get(ENVIRONMENT_VARIABLE)
+    os.environ[ENVIRONMENT_VARIABLE] = value
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(ENVIRONMENT_VARIABLE, None)
+        else:
+            os.environ[ENVIRONMENT_VARIABLE] = before
 
 
 def _check_device(name) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import torch
 
-from ..precision import native_bfloat16
+from ..precision import native_bfloat16, precision_override
 
 __all__ = ["metadata", "print_table"]
 
@@ -29,7 +29,9 @@ def metadata(device: str = "cpu") -> dict:
     return {"date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"), "commit": commit,
             "torch": torch.__version__, "kornia": kornia.__version__, "python": platform.python_version(),
             "device": device, "threads": torch.get_num_threads(), "cpu": platform.processor() or platform.machine(),
-            # what network_precision="auto" runs the models' networks in on this device (torch_depth_sr.precision)
+            # the networks' arithmetic (torch_depth_sr.precision): what overrides every model's setting (None: their
+            # own, "auto" for the shipped ones), and what "auto" runs on this device
+            "network_precision": precision_override(),
             "auto_networks": "bfloat16" if native_bfloat16(torch.device(device)) else "float32",
             **_gpu_metadata(device)}
 
