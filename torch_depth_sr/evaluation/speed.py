@@ -457,9 +457,11 @@ def run_speed(args: argparse.Namespace) -> int:
         meta.update(opencv=cv2.__version__, numpy=numpy.__version__, torch_threads=torch.get_num_threads())
     except ImportError:  # pragma: no cover - both are dependencies
         pass
+    networks = meta.get("network_precision") or f"auto: {meta.get('auto_networks')} here"
     _print_table(table, cols, f"track speed on {device}, {meta['threads']} thread(s); median of {repeats} "
-                 f"after a warm-up; 'x kornia9' = time / kornia joint_bilateral_blur 9x9, 'x full' = time / the "
-                 f"frozen full model (same size, batch, run; full where it ran)")
+                 f"after a warm-up; the models' networks in {networks}; 'x kornia9' = time / kornia "
+                 f"joint_bilateral_blur 9x9, 'x full' = time / the frozen full model (same size, batch, run; full "
+                 f"where it ran)")
     if skipped:
         print("skipped (too slow here): " + ", ".join(skipped))
     if getattr(args, "json", None):
