@@ -132,8 +132,9 @@ class GuidanceNet(nn.Module):
 
     def encode_guide(self, rgb: Optional[torch.Tensor], like: torch.Tensor) -> torch.Tensor:
         """Colour features ``(B,C,H,W)`` of ``rgb (B,3,H,W)`` in [0,1] (a mid-grey image when None), on the grid of
-        ``like (B,1,H,W)``, in the network's own dtype: a float64 input runs the float32 network of a shipped model
-        in float32, and :meth:`PreparedGuidance.maps` returns the multipliers in the input's dtype."""
+        ``like (B,1,H,W)``, in the network's own dtype (bfloat16 when :meth:`prepare` runs it under its precision's
+        autocast): a float64 input runs the float32 network of a shipped model in float32, and
+        :meth:`PreparedGuidance.maps` returns the multipliers in the input's dtype."""
         b, _, h, w = like.shape
         if rgb is None:
             rgb = like.new_full((b, 3, h, w), 0.5)
