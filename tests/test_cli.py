@@ -80,11 +80,12 @@ def test_bench_config_overrides_reach_the_model_and_bad_ones_are_refused():
             _parse_config(bad)
 
 
-@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
-def test_network_precision_reaches_the_model_and_leaves_the_environment_as_it_was(tmp_path, precision, monkeypatch):
+def test_network_precision_reaches_the_model_and_leaves_the_environment_as_it_was(tmp_path, monkeypatch):
     """``restore --network-precision P`` gives what the library gives inside ``network_precision(P)`` (float depth in
     and out, so no rounding hides a difference), and the two arithmetics differ; the variable it sets for worker
     processes is gone after the command."""
+    import os
+
     from torch_depth_sr import DepthRestorer
     from torch_depth_sr.precision import ENVIRONMENT_VARIABLE, network_precision
 
@@ -95,17 +96,16 @@ def test_network_precision_reaches_the_model_and_leaves_the_environment_as_it_wa
     np.save(tmp_path / "d.npy", depth)
     rgb = (s["rgb"].permute(1, 2, 0).numpy() * 255).astype(np.uint8)
     cv2.imwrite(str(tmp_path / "c.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-    assert main(["restore", str(tmp_path / "d.npy"), str(tmp_path / "c.png"), "-o", str(tmp_path / "out.npy"),
-                 "--preset", "best", "--network-precision", precision]) == 0
-    import os
-
-    assert ENVIRONMENT_VARIABLE not in os.environ
-    out = np.load(tmp_path / "out.npy")
     model = DepthRestorer.from_preset("best")
     rgb_t = torch.from_numpy(rgb).permute(2, 0, 1)[None].float() / 255
     runs = {}
     for p in ("float32", "bfloat16"):
         with torch.no_grad(), network_precision(p):
             runs[p] = model(torch.from_numpy(depth)[None, None], rgb_t)[0, 0].numpy()
-    assert np.array_equal(out, runs[precision])
     assert not np.array_equal(runs["float32"], runs["bfloat16"])
+    for precision in ("float32", "bfloat16"):
+        out = tmp_path / f"out_{precision}.npy"
+        assert main(["restore", str(tmp_path / "d.npy"), str(tmp_path / "c.png"), "-o", str(out),
+                     "--preset", "best", "--network-precision", precision]) == 0
+        assert ENVIRONMENT_VARIABLE not in os.environ
+        assert np.array_equal(np.load(out), runs[precision])
