@@ -401,10 +401,11 @@ def test_model_refine_rematching_stays_close_to_exact():
 @pytest.mark.parametrize("block,window,k", [(5, 11, 8), (3, 7, 10)])
 def test_the_torch_re_matching_ranks_the_cpu_kernels_candidates(dtype, with_trust, block, window, k):
     """refine_torch (the device path) against refine_cpu: the previous matches alone are re-scored in the kernel's
-    order (float32: the same distances bit for bit); with the step-2 lattice the lattice's distances are box sums
-    (the last bit may differ), so almost every match is the same. The default tier's 7×7 window at stride 2 has 9
-    lattice offsets, fewer than its k = 10."""
-    from torch_depth_sr.block_matching.refine_cpu import refine_cpu
+    order (float32: the same distances bit for bit, in windows where the kernel re-scores each candidate alone);
+    distances that are box sums (the lattice's; every one in small windows) may differ in the last bit, so almost
+    every match is the same. The default tier's 7×7 window at stride 2 has 9 lattice offsets, fewer than its
+    k = 10."""
+    from torch_depth_sr.block_matching.refine_cpu import _MASKED_UP_TO, refine_cpu
     from torch_depth_sr.block_matching.refine_torch import refine_torch
 
     g = torch.Generator().manual_seed(4)
@@ -418,7 +419,7 @@ def test_the_torch_re_matching_ranks_the_cpu_kernels_candidates(dtype, with_trus
         d_torch, i_torch = refine_torch(moved, rgb, trust, first.index, block, window, k, rho, False, lattice)
         assert float((i_cpu == i_torch).double().mean()) >= 0.999, lattice
         assert torch.allclose(d_cpu, d_torch, rtol=1e-6, atol=1e-6)
-        if lattice == 0 and dtype == torch.float32:
+        if lattice == 0 and dtype == torch.float32 and window > _MASKED_UP_TO:
             assert torch.equal(d_cpu, d_torch)
         if lattice == 2:  # never worse than the previous matches re-scored (the lattice only adds candidates)
             assert bool((d_torch <= refine_torch(moved, rgb, trust, first.index, block, window, k, rho, False, 0)[0]
@@ -445,30 +446,26 @@ def test_the_default_tiers_device_path_re_matches_as_the_cpu_does(monkeypatch):
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("reach,include_self", [(0, False), (1, False), (0, True)])
-def test_refine_planes_give_the_candidates_distances_bit_for_bit(dtype, reach, include_self):
-    """The re-ranking's two ways to a candidate's distance, every offset's in vector loops first (small windows) or
-    each candidate's alone, keep the same lists: the same sums in the same order, compared in the same precision."""
-    import numpy as np
-
+@pytest.mark.parametrize("lattice", [0, 2])
+def test_small_windows_re_rank_the_same_candidates_by_the_masked_exact_search(dtype, reach, include_self, lattice):
+    """The re-ranking's two kernels, the exact search keeping each pixel's candidates (bit masks; small windows) and
+    each candidate's distance alone (then the lattice, seeded): the same lists, up to the last bit of a distance."""
     from torch_depth_sr.block_matching import refine_cpu as rc
-    from torch_depth_sr.block_matching.cpu_exact import padded_planes
 
     g = torch.Generator().manual_seed(1)
     h, w, k = 37, 29, 6
-    x = torch.rand(1, 1, h, w, generator=g).to(dtype)
-    x[..., 10:20, 5:15] = 0.5  # a flat patch: equal distances, ties to the smaller offset
-    c = torch.rand(1, 3, h, w, generator=g).to(dtype)
-    t = (torch.rand(1, 1, h, w, generator=g) > 0.2).to(dtype)
-    prev = block_match(x + 0.01, c, t, block_size=3, search_window=7, k=k).index.numpy()
-    xp, tp, cp, use_t = padded_planes(x, c, t, 1, 3)
-    consts = np.array([[400 / 27, 1 / 9]], dtype=xp.dtype)
-    out = []
-    for planes_too in (True, False):
-        topd, topi = np.empty((1, h, w, k), xp.dtype), np.empty((1, h, w, k), np.int32)
-        if planes_too:
-            for n in range(-(-h // 8)):  # bands of 8 rows, the last one shorter
-                rc._refine_band(xp, tp, cp, use_t, h, w, 1, 3, prev, reach, include_self, consts, topd, topi, n, 8)
-        else:
-            rc._refine(xp, tp, cp, use_t, h, w, 1, 3, prev, reach, include_self, consts, topd, topi)
-        out.append((topd, topi))
-    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
+    x = torch.rand(2, 1, h, w, generator=g).to(dtype)
+    x[..., 10:20, 5:15] = 0.5  # a flat patch: near-equal distances, ties to the smaller offset
+    c = torch.rand(2, 3, h, w, generator=g).to(dtype)
+    t = (torch.rand(2, 1, h, w, generator=g) > 0.2).to(dtype)
+    prev = block_match(x + 0.01, c, t, block_size=3, search_window=7, k=k).index
+    prev[0, :2, :3] = -1  # missing matches (a stream's crop): no candidate
+    rho = torch.tensor([400.0, 2.0], dtype=dtype)
+    out = {}
+    for masked_up_to in (9, 0):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(rc, "_MASKED_UP_TO", masked_up_to)
+            out[masked_up_to] = rc.refine_cpu(x, c, t, prev, 3, 7, k, rho, include_self, reach, lattice)
+    (d_mask, i_mask), (d_each, i_each) = out[9], out[0]
+    assert float((i_mask == i_each).double().mean()) >= 0.999
+    torch.testing.assert_close(d_mask, d_each, rtol=1e-5, atol=1e-6)

@@ -213,6 +213,9 @@ def _listed_key(o, keys, j):
     return False
 
 
+_NO_KEY = np.uint64(0xFFFFFFFFFFFFFFFF)  # sorts after every key: an offer of it changes no list
+
+
 # ---- which lists a band runs, chosen when numba types _band's ``keys`` (None, or an array): only that way is compiled
 def _lists_pack(rd, ri, keys):
     """The lists as keys when ``keys`` is an array (:func:`_pack`); nothing when None. Compiled code only."""
@@ -237,6 +240,13 @@ def _lists_high(dd, high, j0, j1, keys):
 
 def _keyed(keys) -> bool:
     return not isinstance(keys, (types.NoneType, types.Omitted))
+
+
+def _only_allowed(dd, high, j0, j1, masks, row, c0, oid, dm, hm):
+    """The offer of offset ``oid`` to the pixels ``(row, c0 + j - j0)``, ``j`` in ``[j0, j1)``: ``(dd, high)`` as
+    they are when ``masks`` is None; else copies ``(dm, hm)`` in which a pixel whose candidate bit ``oid`` is not set
+    in ``masks`` (words, H, W) offers what beats no list (NaN, all-ones keys)."""
+    raise NotImplementedError
 
 
 @overload(_lists_pack)
@@ -265,6 +275,24 @@ def _ol_lists_offer(dd, high, j0, j1, a0, oid, rd, ri, keys, row, seeded):
     return offer_pairs
 
 
+@overload(_only_allowed)
+def _ol_only_allowed(dd, high, j0, j1, masks, row, c0, oid, dm, hm):
+    if not _keyed(masks):
+        return lambda dd, high, j0, j1, masks, row, c0, oid, dm, hm: (dd, high)
+
+    def masked(dd, high, j0, j1, masks, row, c0, oid, dm, hm):
+        bit = np.uint64(1) << np.uint64(oid & 63)
+        m = masks[oid >> 6, row, c0:c0 + (j1 - j0)]
+        dv, hv, dmv, hmv = dd[j0:j1], high[j0:j1], dm[j0:j1], hm[j0:j1]
+        nan = dd[0] - dd[0] + np.nan
+        for j in range(j1 - j0):
+            ok = (m[j] & bit) != 0
+            dmv[j] = dv[j] if ok else nan
+            hmv[j] = hv[j] if ok else _NO_KEY
+        return dm, hm
+    return masked
+
+
 @overload(_lists_high)
 def _ol_lists_high(dd, high, j0, j1, keys):
     if _keyed(keys):
@@ -279,12 +307,13 @@ def _ol_lists_high(dd, high, j0, j1, keys):
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded, dist, index,
-          keys):
+          keys, masks):
     """Running top-k for image rows [h0, h1); ``topd/topi`` are (h1-h0, W, k) views of this band: the working lists,
     read when ``seeded`` and written at the end, unless ``dist`` and ``index`` (k, H, W) are not empty: then the band
     writes its rows of the final distances and flat indices there instead (what :func:`_finalize` would make).
     ``keys``: None, or for float32 planes a (h1-h0, k, W) uint64 array in which the lists run as packed keys
-    (the ``_lists_*`` overloads: numba compiles only the way the argument's type selects).
+    (the ``_lists_*`` overloads: numba compiles only the way the argument's type selects). ``masks``: None, or
+    (words, H, W) uint64 bits of the offsets each pixel may keep (:func:`_only_allowed`; the re-matching's candidates).
 
     ``xp, tp`` (Hp, Wp) and ``cp`` (C, Hp, Wp): planes replicate-padded by r, then zero-padded by R.
     ``consts`` = (ρ/C, ρ/(C·b²), 1/b²) in the planes' dtype, so that float32 stays float32 (SIMD width).
@@ -312,6 +341,8 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
                 rd[a, m, j] = topd[a, j, m] if seeded else np.inf
                 ri[a, m, j] = topi[a, j, m] if seeded else _ID_NONE
     high = np.zeros(big_w, dtype=np.uint64)  # a row's distances as the high halves of keys
+    dm = np.zeros(big_w, dtype=xp.dtype)  # the same, with the offers of the candidates a pixel may not keep voided
+    hm = np.zeros(big_w, dtype=np.uint64)
     _lists_pack(rd, ri, keys)
     for io in range(order.shape[0]):
         oid = order[io]
@@ -410,9 +441,11 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
                     ddv[j] = zero
             _lists_high(dd, high, j0, j1, keys)
             if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
-                _lists_offer(dd, high, j0, j1, j0, np.int64(oid), rd, ri, keys, i - h0, seeded)
+                dv, hv = _only_allowed(dd, high, j0, j1, masks, i, j0, oid, dm, hm)
+                _lists_offer(dv, hv, j0, j1, j0, np.int64(oid), rd, ri, keys, i - h0, seeded)
             if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
-                _lists_offer(dd, high, j0, j1, j0 + dx, mid, rd, ri, keys, i + dy - h0, seeded)
+                dv, hv = _only_allowed(dd, high, j0, j1, masks, i + dy, j0 + dx, mid, dm, hm)
+                _lists_offer(dv, hv, j0, j1, j0 + dx, mid, rd, ri, keys, i + dy - h0, seeded)
     _lists_unpack(keys, rd, ri)
     if dist.size > 0:
         for a in range(h1 - h0):
@@ -474,11 +507,12 @@ def padded_planes(depth, rgb, trust, r: int, big_r: int):
 
 
 def search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, seeded,
-           out=None):
+           out=None, masks=None):
     """Run the exact search over the offsets of the ``stride`` lattice into the working lists ``topd/topi``
     (B, H, W, k); with ``seeded`` they start from the candidates already in them. With ``out = (dist, index)``
     (B, k, H, W) and lists that are not seeded, the bands write the final matches there instead (``topd/topi``
-    unused: pass None)."""
+    unused: pass None). With ``masks`` (B, words, H, W) uint64, a pixel keeps only the offsets whose bits are set
+    (offset id ``o``: bit ``o % 64`` of word ``o // 64``)."""
     xp, tp, cp, use_t = planes
     bsz = xp.shape[0]
     k = out[0].shape[1] if out is not None else topd.shape[-1]
@@ -508,7 +542,7 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
         b, h0, h1 = bands[n]
         keys = np.empty((h1 - h0, k, w), np.uint64) if packed else None
         _band(xp[b], tp[b], cp[b], use_t, h, w, r, big_r, order, both, consts[b], h0, h1, topd[b, h0:h1],
-              topi[b, h0:h1], seeded, *out_of(b), keys)
+              topi[b, h0:h1], seeded, *out_of(b), keys, None if masks is None else masks[b])
 
     run_tasks(band, len(bands))
 
