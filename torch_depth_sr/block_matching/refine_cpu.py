@@ -19,6 +19,7 @@ import torch
 from numba import njit, prange
 
 from ..native import kernel_threads, run_range
+from ._common import offset_order
 from .cpu_exact import _ID_NONE, finalize, padded_planes, search
 
 __all__ = ["refine_cpu"]
@@ -92,58 +93,62 @@ def _block_distance(cx, ct, cc, xp, tp, cp, use_t, yb, xb, bs, crho, inb):
 
 
 @njit(cache=True, nogil=True)
-def _candidate_masks(prev, reach, lattice, big_h, big_w, big_r, include_self, masks, n0, n1):
+def _candidate_masks(prev, reach, base, big_h, big_w, big_r, masks, n0, n1):
     """``masks[b, o // 64, i, j]`` bit ``o % 64`` set for each offset ``o`` that pixel ``(i, j)`` re-ranks: those of
-    :func:`_candidates` (its previous matches, its neighbours' at ``reach``) and, with ``lattice > 0``, the window's
-    offsets whose ``dy`` and ``dx`` are multiples of it, each inside the image and not the centre unless
-    ``include_self``; for the rows ``[n0, n1)`` of the flattened (B·H) batch."""
+    :func:`_candidates` (its previous matches, its neighbours' at ``reach``) and those set in ``base`` (words,): the
+    lattice's; for the rows ``[n0, n1)`` of the flattened (B·H) batch. Offsets whose candidate lies outside the image
+    or at the centre may be set too: the search never offers those (its order omits the centre unless
+    ``include_self``)."""
     s = 2 * big_r + 1
-    centre = big_r * s + big_r
-    one = np.uint64(1)
+    one, zero = np.uint64(1), np.uint64(0)
+    inv_w = 1.0 / big_w
     for n in range(n0, n1):
         b = n // big_h
         i = n % big_h
         mb = masks[b]
-        for w in range(mb.shape[0]):
+        for wd in range(mb.shape[0]):
+            row = mb[wd, i]
             for j in range(big_w):
-                mb[w, i, j] = 0
+                row[j] = base[wd]
         pb = prev[b]
-        for j in range(big_w):
-            for src in range(5 if reach > 0 else 1):
-                ni, nj = i, j
-                if src == 1:
-                    ni = i - reach
-                elif src == 2:
-                    ni = i + reach
-                elif src == 3:
-                    nj = j - reach
-                elif src == 4:
-                    nj = j + reach
-                if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
-                    continue
-                for m in range(pb.shape[0]):
-                    flat = pb[m, ni, nj]
-                    if flat < 0:  # a missing match (a stream's crop)
-                        continue
-                    dy = flat // big_w - ni
-                    dx = flat % big_w - nj
-                    if abs(dy) > big_r or abs(dx) > big_r:
-                        continue
-                    oid = (dy + big_r) * s + dx + big_r
-                    if oid == centre and not include_self:
-                        continue
-                    if i + dy < 0 or i + dy >= big_h or j + dx < 0 or j + dx >= big_w:
-                        continue
-                    mb[oid >> 6, i, j] |= one << np.uint64(oid & 63)
-            if lattice > 0:
-                for dy in range(-(big_r // lattice) * lattice, big_r + 1, lattice):
-                    if i + dy < 0 or i + dy >= big_h:
-                        continue
-                    for dx in range(-(big_r // lattice) * lattice, big_r + 1, lattice):
-                        if j + dx < 0 or j + dx >= big_w or (dy == 0 and dx == 0 and not include_self):
-                            continue
+        for src in range(5 if reach > 0 else 1):
+            di, dj = 0, 0
+            if src == 1:
+                di = -reach
+            elif src == 2:
+                di = reach
+            elif src == 3:
+                dj = -reach
+            elif src == 4:
+                dj = reach
+            ni = i + di
+            if ni < 0 or ni >= big_h:
+                continue
+            j0, j1 = max(0, -dj), min(big_w, big_w - dj)
+            for m in range(pb.shape[0]):
+                pm = pb[m, ni, j0 + dj:j1 + dj]
+                base_flat = ni * big_w + j0 + dj
+                for wd in range(mb.shape[0]):  # branch-free loops over the row (vectorised), a word at a time
+                    row = mb[wd, i, j0:j1]
+                    for j in range(j1 - j0):
+                        flat = pm[j]
+                        # the offset (dy, dx) of the match from its pixel: dy by a float floor, exact at these sizes
+                        d = flat - (base_flat + j)
+                        dy = np.int64(np.floor((d + big_r + 0.5) * inv_w))
+                        dx = d - dy * big_w
                         oid = (dy + big_r) * s + dx + big_r
-                        mb[oid >> 6, i, j] |= one << np.uint64(oid & 63)
+                        # a missing match (a stream's crop: -1) or one outside the window sets no bit
+                        ok = (flat >= 0) & (abs(dy) <= big_r) & (abs(dx) <= big_r) & ((oid >> 6) == wd)
+                        row[j] |= (one << np.uint64(oid & 63)) if ok else zero
+
+
+def _lattice_words(search_window: int, lattice: int, words: int) -> np.ndarray:
+    """The bits of the window's offsets whose ``dy`` and ``dx`` are multiples of ``lattice`` (none for 0)."""
+    out = np.zeros(words, np.uint64)
+    if lattice > 0:
+        for oid in offset_order(search_window, lattice, True).tolist():
+            out[oid >> 6] |= np.uint64(1) << np.uint64(oid & 63)
+    return out
 
 
 @njit(cache=True, inline="always")
@@ -239,10 +244,10 @@ def refine_cpu(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional
     prev = previous_index.detach().cpu().to(torch.int64).contiguous().numpy()  # int64, C order: one compiled signature
     kernel_threads()
     if search_window <= _MASKED_UP_TO:  # the exact search, each pixel keeping its candidates only
-        s = 2 * big_r + 1
-        masks = np.empty((bsz, -(-s * s // 64), h, w), np.uint64)
-        run_range(lambda n0, n1: _candidate_masks(prev, int(reach), int(lattice), h, w, big_r, bool(include_self),
-                                                  masks, n0, n1), bsz * h)
+        words = -(-search_window ** 2 // 64)
+        masks = np.empty((bsz, words, h, w), np.uint64)
+        base = _lattice_words(search_window, lattice, words)
+        run_range(lambda n0, n1: _candidate_masks(prev, int(reach), base, h, w, big_r, masks, n0, n1), bsz * h)
         dist = np.empty((bsz, k, h, w), dtype=xp.dtype)
         index = np.empty((bsz, k, h, w), dtype=np.int64)
         search(planes, h, w, block_size, search_window, rho, include_self, None, 1, None, None, False,
