@@ -62,6 +62,14 @@ every other entry and the inputs kept byte for byte. The new ``shipped/denoise-f
 the code before this stop (3be6d3d) gives for ``from_preset("fast")``; the old ``named/fast/*`` entries differed from
 that by at most 4.6e-5 (float rounding of earlier stops' kernels, within the test's tolerance).
 
+**``shipped/denoise-best/*`` were made again, on purpose (issue 27, seventeenth stop, 2026-12-05).** The ``best``
+tier re-ranks its matches with a step-3 lattice of its 21×21 window instead of step 2 (``block_matching.
+rematch_lattice`` in its config.json, by the rule in docs/measurements/issue27-tiers/seventeenth-stop/
+rule-best-rematching.md); ``OMP_NUM_THREADS=1 python tests/golden/make_golden.py --add-shipped denoise-best``
+rewrote its entries, every other entry and the inputs kept byte for byte. The same stop's re-ranking of small
+windows by the exact search's kernel (``refine_cpu._MASKED_UP_TO``) moves the ``default`` tier's outputs by float
+rounding only, within the test's tolerance: its entries were kept.
+
 Inputs (tiny, deterministic; stored so that the test does not depend on the scene generator): one synthetic scene
 (``make_scene(32, 40, seed=7)``), its colour image at 32x40 (the output size of every task); denoising: Gaussian noise
 sigma = 3, two holes, five impulses and five flying pixels; guided upsampling x2 and x4: the ground truth area-averaged
