@@ -171,8 +171,12 @@ def _rewrite(models: dict) -> None:
 
 
 def _store(outputs: dict, key: str, model, inputs: dict, task: str) -> None:
-    """One case's outputs: the depth, and the confidence of denoising."""
-    r = model.restore_with_details(inputs[task], inputs["rgb"])
+    """One case's outputs: the depth, and the confidence of denoising; the networks in float32, as the test runs them
+    (on a processor with AMX ``network_precision="auto"`` would pick bfloat16)."""
+    from torch_depth_sr.precision import network_precision
+
+    with network_precision("float32"):
+        r = model.restore_with_details(inputs[task], inputs["rgb"])
     outputs[f"{key}/depth"] = r.depth.detach().clone()
     if task == "denoise":
         outputs[f"{key}/confidence"] = r.confidence.detach().clone()
