@@ -36,8 +36,11 @@ def _warmup_steps(dtype: torch.dtype):
     def matching():
         held["m"] = block_match(x, rgb, trust, **kw, backend="numba")
 
-    def rematching():  # the candidates' re-ranking, then the lattice search seeded with them
+    def rematching():  # the re-ranking: a small window's by the exact search kept to the candidates, a larger one's
+        # (the best tier's 21×21) candidate by candidate, then the lattice search seeded with them
         refine_matches(x, held["m"], rgb, None, **kw, reach=1, lattice=2)
+        wide = dict(kw, search_window=11)
+        refine_matches(x, block_match(x, rgb, trust, **wide, backend="numba"), rgb, trust, **wide, lattice=2)
 
     def terms():
         with torch.no_grad():
