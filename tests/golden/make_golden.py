@@ -67,8 +67,14 @@ tier re-ranks its matches with a step-3 lattice of its 21×21 window instead of 
 rematch_lattice`` in its config.json, by the rule in docs/measurements/issue27-tiers/seventeenth-stop/
 rule-best-rematching.md); ``OMP_NUM_THREADS=1 python tests/golden/make_golden.py --add-shipped denoise-best``
 rewrote its entries, every other entry and the inputs kept byte for byte. The same stop's re-ranking of small
-windows by the exact search's kernel (``refine_cpu._MASKED_UP_TO``) moves the ``default`` tier's outputs by float
-rounding only, within the test's tolerance: its entries were kept.
+windows by the exact search's kernel (``refine_cpu._MASKED_UP_TO``) moved the ``default`` tier's outputs by float
+rounding only, within the test's tolerance, so its entries were kept then (they were made again for its refiner, next).
+
+**``shipped/denoise-default/*`` were made again, on purpose (issue 27, seventeenth stop, 2026-12-05).** The
+``default`` tier's edge refiner is now the twelfth stop's 24-channel one (by the rule in
+docs/measurements/issue27-tiers/seventeenth-stop/rule-default-r24-again.md); ``OMP_NUM_THREADS=1 python
+tests/golden/make_golden.py --add-shipped denoise-default`` rewrote its entries (their denoising outputs changed),
+every other entry and the inputs kept byte for byte.
 
 Inputs (tiny, deterministic; stored so that the test does not depend on the scene generator): one synthetic scene
 (``make_scene(32, 40, seed=7)``), its colour image at 32x40 (the output size of every task); denoising: Gaussian noise

@@ -40,7 +40,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 #   layers); about a tenth of the frozen "full"'s time at 640×480 ("denoise-fast2"; "denoise-fast", 3 layers,
 #   until 2026-12-05, is the stream's model);
 # "default": what restore_depth(depth, rgb) runs to denoise: the guidance CNN's per-pixel thresholds of
-#   "denoise-guided" with a 7×7 search window, then a 16-channel edge refiner; more accurate than "full" and about a
+#   "denoise-guided" with a 7×7 search window, then a 24-channel edge refiner; more accurate than "full" and about a
 #   third of its time;
 # "best": the best shipped denoiser: "denoise-refined" (the guidance CNN's per-pixel thresholds and the edge refiner)
 #   with its refiner fine-tuned on near-clean noise as well, so that a near-clean map does not come out worse.
