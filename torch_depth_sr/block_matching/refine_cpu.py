@@ -93,6 +93,30 @@ def _block_distance(cx, ct, cc, xp, tp, cp, use_t, yb, xb, bs, crho, inb):
     return d if d > zero else zero
 
 
+@njit(cache=True, inline="always")
+def _source(src, reach):
+    """The pixel whose previous matches source ``src`` offers, relative to the re-ranked pixel: itself (0) or its
+    neighbour ``reach`` away (1-4: up, down, left, right)."""
+    if src == 1:
+        return -reach, 0
+    if src == 2:
+        return reach, 0
+    if src == 3:
+        return 0, -reach
+    if src == 4:
+        return 0, reach
+    return 0, 0
+
+
+@njit(cache=True, inline="always")
+def _match_offset(d, big_w, big_r, inv_w):
+    """``(dy, dx)`` of a match ``d = dy·W + dx`` flat positions from its pixel (``|dx| <= R``): ``dy`` by a float
+    floor, exact here (the fraction stays 0.5 / W or more away from an integer), and no libm call or integer
+    division by the runtime width (that division cost about a tenth of the re-ranking)."""
+    dy = np.int64((d + big_r + 0.5) * inv_w + _FLOOR_SHIFT) - np.int64(_FLOOR_SHIFT)
+    return dy, d - dy * big_w
+
+
 @njit(cache=True, nogil=True)
 def _candidate_masks(prev, reach, base, big_h, big_w, big_r, masks, n0, n1):
     """``masks[b, o // 64, i, j]`` bit ``o % 64`` set for each offset ``o`` that pixel ``(i, j)`` re-ranks: those of
@@ -113,15 +137,7 @@ def _candidate_masks(prev, reach, base, big_h, big_w, big_r, masks, n0, n1):
                 row[j] = base[wd]
         pb = prev[b]
         for src in range(5 if reach > 0 else 1):
-            di, dj = 0, 0
-            if src == 1:
-                di = -reach
-            elif src == 2:
-                di = reach
-            elif src == 3:
-                dj = -reach
-            elif src == 4:
-                dj = reach
+            di, dj = _source(src, reach)
             ni = i + di
             if ni < 0 or ni >= big_h:
                 continue
@@ -133,10 +149,7 @@ def _candidate_masks(prev, reach, base, big_h, big_w, big_r, masks, n0, n1):
                     row = mb[wd, i, j0:j1]
                     for j in range(j1 - j0):
                         flat = pm[j]
-                        # the offset (dy, dx) of the match from its pixel: dy by a float floor, exact at these sizes
-                        d = flat - (base_flat + j)
-                        dy = np.int64(np.floor((d + big_r + 0.5) * inv_w))
-                        dx = d - dy * big_w
+                        dy, dx = _match_offset(flat - (base_flat + j), big_w, big_r, inv_w)
                         oid = (dy + big_r) * s + dx + big_r
                         # a missing match (a stream's crop: -1) or one outside the window sets no bit
                         ok = (flat >= 0) & (abs(dy) <= big_r) & (abs(dx) <= big_r) & ((oid >> 6) == wd)
@@ -158,15 +171,8 @@ def _candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oid
     matches of the pixel itself (``src`` 0) or of its neighbour ``reach`` away (1-4: up, down, left, right), inside
     the image, not the centre unless ``include_self``, and (a neighbour's) not already in the list ``ti[j]``. A
     source's offsets are distinct, so none of them is listed by another of the same source."""
-    ni, nj = i, j
-    if src == 1:
-        ni = i - reach
-    elif src == 2:
-        ni = i + reach
-    elif src == 3:
-        nj = j - reach
-    elif src == 4:
-        nj = j + reach
+    di, dj = _source(src, reach)
+    ni, nj = i + di, j + dj
     if ni < 0 or ni >= big_h or nj < 0 or nj >= big_w:
         return 0
     s = 2 * big_r + 1
@@ -177,11 +183,7 @@ def _candidates(pb, i, j, src, reach, big_h, big_w, big_r, include_self, ti, oid
         flat = pb[m, ni, nj]
         if flat < 0:  # a missing match (a stream's crop); a neighbour's once became an offset outside the window
             continue
-        # the match's offset from its pixel, dy by a float floor (exact here: the fraction stays 0.5 / W or more away
-        # from an integer); an integer division by the runtime width cost about a tenth of the re-ranking
-        d = flat - (ni * big_w + nj)
-        dy = np.int64((d + big_r + 0.5) * inv_w + _FLOOR_SHIFT) - np.int64(_FLOOR_SHIFT)
-        dx = d - dy * big_w
+        dy, dx = _match_offset(flat - (ni * big_w + nj), big_w, big_r, inv_w)
         oid = (dy + big_r) * s + dx + big_r
         if oid == centre and not include_self:
             continue
