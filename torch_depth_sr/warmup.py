@@ -10,6 +10,7 @@ import torch
 
 from .block_matching import block_match
 from .block_matching.refine import refine_matches
+from .config import StreamConfig
 from .edge_snap import refit_to_measurements, snap_to_sides
 from .fill import fill_holes_sided
 from .guided_filters import domain_transform_filter
@@ -19,6 +20,7 @@ from .operators import grad
 from .singular import detect_singular, supported_or_line
 from .stream.change import _nearest_distance as nearest_distance, depth_votes, local_spread
 from .stream.matching import dilate
+from .stream.runs import grow_runs, join_runs
 
 __all__ = ["warmup"]
 
@@ -79,9 +81,15 @@ def _warmup_steps(dtype: torch.dtype):
             dilate(x > 0.5, 2)
             depth_votes(x, trust, 3, 0.5)
 
+    def stream_runs():  # a stream's run updates before and after the model
+        s, b, one = StreamConfig(), x > 0.5, torch.ones(1, dtype=dtype)
+        with torch.no_grad():
+            j = join_runs(x, trust, b, b, x + 1, x, x, x, x, one, one, s)
+            grow_runs(j.y, j.observed, b, x, b, j.restarted, x, x, x, x, one, one, s)
+
     return [("block matching", matching), ("re-matching", rematching), ("nonlocal terms", terms),
             ("singular test", singular), ("edge steps", edges), ("hole fill", hole_fill), ("x0 filter", domain),
-            ("stream means", stream_means), ("stream change test", stream_change)]
+            ("stream means", stream_means), ("stream change test", stream_change), ("stream runs", stream_runs)]
 
 
 def _model_steps(model: torch.nn.Module, dtype: torch.dtype):

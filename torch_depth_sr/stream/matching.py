@@ -80,10 +80,14 @@ class StreamMatcher:
     is False; the pixels where it is True are searched by ``inner`` on bands of rows. It stands where the model's
     matcher stands (``obs.block_matcher``): x⁰'s matches (a call) and a scheduled layer's (:meth:`rematch`)."""
 
-    def __init__(self, inner: BlockMatcher, previous: tuple[torch.Tensor, torch.Tensor], fresh: torch.Tensor):
+    def __init__(self, inner: BlockMatcher, previous: tuple[torch.Tensor, torch.Tensor], fresh: torch.Tensor,
+                 weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None):
         self.inner = inner
         self.previous_dist, self.previous_index = previous
         self.fresh = fresh
+        # the previous matches' weights and the temperature they were made at: with nothing fresh, the same
+        # temperature and no gradient wanted, the softmax would give them again bit for bit
+        self.previous_weights = weights
         self.searched = 0  # pixels searched (crops included), summed over the calls of this frame
 
     # the matcher's interface as the model's stages read it
@@ -118,7 +122,10 @@ class StreamMatcher:
     def _mix(self, x: torch.Tensor, obs: Observation, q: torch.Tensor,
              previous: Optional[BlockMatches]) -> BlockMatches:
         dist, index = self.previous_dist.to(x.dtype), self.previous_index
-        if bool(self.fresh.any()):
+        fresh = bool(self.fresh.any())
+        if not fresh and self._weights_hold(dist):
+            return BlockMatches(dist.detach(), index, self.previous_weights[0])
+        if fresh:
             h, w = x.shape[-2:]
             s = self.settings
             window, k = s.window_and_k()[obs.task]
@@ -148,6 +155,17 @@ class StreamMatcher:
                                                         dist[..., core_r, core_c])
                 index[..., core_r, core_c] = torch.where(fresh, found, index[..., core_r, core_c])
         return finish(dist.detach(), index, self.temperature)  # the weights at the current temperature (it learns)
+
+
+    def _weights_hold(self, dist: torch.Tensor) -> bool:
+        """Whether the previous weights are what :func:`finish` would give for ``dist`` now."""
+        if self.previous_weights is None:
+            return False
+        weight, made_at = self.previous_weights
+        t = self.temperature
+        if t.requires_grad and torch.is_grad_enabled():  # the weights must carry the temperature's gradient
+            return False
+        return weight.dtype == dist.dtype and weight.shape == dist.shape and torch.equal(made_at, t.detach().to(made_at))
 
 
 def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:

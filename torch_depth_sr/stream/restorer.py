@@ -46,6 +46,8 @@ from ..terms import TemporalPriorTerm
 from .change import change_test, local_spread
 from .crop_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
+from .runs import grow_runs, join_runs
+from .warm_start import WarmStart
 
 __all__ = ["DEFAULT_STREAM_MODEL", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
            "default_stream_model", "with_stream"]
@@ -81,6 +83,8 @@ class StreamState:
     rgb: Optional[torch.Tensor]  # (B,3,H,W) the colour image
     matches: Optional[tuple[torch.Tensor, torch.Tensor]]  # the last layer's (dist, index), or None
     departed: torch.Tensor  # (B,1,H,W) a measurement held out as the first departure from its run's mean (0: none)
+    alpha: Optional[torch.Tensor] = None  # (B,2,H,W) α⁰ in depth units (warm_start; None: not kept)
+    match_weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None  # the matches' weights, the temperature
 
 
 class StreamResult(NamedTuple):
@@ -155,6 +159,8 @@ class _Frame:
         self.stats: dict = {}
         self.static: Optional[torch.Tensor] = None
         self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
+        self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
+        self.reuse: Optional[WarmStart] = None  # α⁰, kept from the previous frame where not fresh
         self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
 
     def observe(self, obs: Observation) -> Observation:
@@ -176,53 +182,28 @@ class _Frame:
             own = (obs.rgb - st.rgb.to(obs.rgb)).abs().mean(1, keepdim=True) > s.color_test
             static = static & ~(own & (obs.observed <= 0))
         evidence = st.evidence.to(dt)
-        mean = obs.normalise(st.mean.to(dt))
-        had = (st.mean > 0) & (evidence > 0)
-        limit = (s.outlier_test or math.inf) * noise
-        # the value the previous frame held out or dropped, measured again: the scene changed at this pixel (a
-        # pole, an edge that moved, a surface that stepped) and a run starts from it
-        pending = obs.normalise(st.departed.to(dt))
-        confirmed = (st.departed > 0) & (obs.observed > 0) & ((obs.y - pending).abs() <= limit)
-        # an outlier in time where the past was measured confidently: taken as missing (held at the past), and
-        # remembered
-        outlier = test.outlier & (evidence >= s.fill_evidence) & ~confirmed
-        dropped = torch.where(outlier, obs.denormalise(obs.y), torch.zeros_like(obs.y))
-        self.stats["outliers_in_time"] = float(outlier.float().mean())
-        if bool(outlier.any()):
-            obs = replace(obs, observed=torch.where(outlier, torch.zeros_like(obs.observed), obs.observed),
-                          y=torch.where(outlier, torch.zeros_like(obs.y), obs.y), glitches=obs.glitches | outlier)
-        # the measurement of a static pixel joins the mean of its run (the model sees the mean: every stage that
-        # reads y, the data term and the do-no-harm band included). A measurement that left the mean by more than
-        # outlier_test noise levels starts a new run when the previous frame's measurement had left it to the same
-        # value (confirmed); a first departure from a confident run is held out (the pixel keeps its run's mean) and
-        # remembered (at a depth edge a mixed or flying pixel takes the other side's depth in single frames: a new
-        # mean each time flipped the edge from frame to frame)
-        departed = static & (obs.observed > 0) & had & ((obs.y - mean).abs() > limit)
-        held_out = departed & ~confirmed & (evidence >= s.fill_evidence)
-        self.departed = torch.where(held_out, obs.denormalise(obs.y), dropped).detach()
-        self.stats["held_out"] = float(held_out.float().mean())
-        if bool(held_out.any()):
-            obs = replace(obs, y=torch.where(held_out, mean, obs.y))
-        measured = obs.observed > 0
-        restarted = departed & ~held_out
-        averaged = static & measured & had & ~restarted
-        y = torch.where(averaged, (obs.y + evidence * mean) / (evidence + 1), obs.y)
-        obs = replace(obs, y=y)
-        # a hole the past did not measure confidently: its fill is the frame's own, damped over a few frames only
-        age = st.age.to(dt)
-        unmeasured = ~measured & (evidence < s.fill_evidence)
-        age = torch.where(unmeasured, age.clamp(max=s.unmeasured_frames), age)
-        weight = torch.where(static & ~restarted, s.weight * age, torch.zeros_like(evidence))
-        self.static, self.warm = static, True
-        obs = replace(obs, temporal=TemporalPrior(target, weight, static, evidence, averaged, restarted, test.seen))
+        runs = join_runs(obs.y, obs.observed, static, test.outlier, noise, evidence, st.mean.to(dt),
+                         st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
+        self.stats["outliers_in_time"] = float(runs.outlier.float().mean())
+        self.stats["held_out"] = float(runs.held_out.float().mean())
+        glitches = obs.glitches | runs.outlier if bool(runs.outlier.any()) else obs.glitches
+        obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches)
+        self.departed = runs.departed.detach()
+        self.static, self.warm, self.fresh = static, True, runs.fresh
+        obs = replace(obs, temporal=TemporalPrior(target, runs.weight, static, evidence, runs.averaged,
+                                                  runs.restarted, test.seen))
         if s.reuse_matches and st.matches is not None:
             fresh = dilate(test.changed, search_radius(obs.block_matcher.settings, obs.task))
-            obs = replace(obs, block_matcher=StreamMatcher(obs.block_matcher, st.matches, fresh))
+            obs = replace(obs, block_matcher=StreamMatcher(obs.block_matcher, st.matches, fresh, st.match_weights))
             self.stats["reused_matches"] = float((~fresh).float().mean())
         return obs
 
     def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
-        initial = init(obs)
+        st, fresh = self.state, self.fresh if self.settings.reuse_initial else None
+        previous = None if st is None or st.alpha is None else st.alpha.to(obs.y) / obs.scale.to(obs.y).view(-1, 1, 1, 1)
+        self.reuse = WarmStart(previous, fresh, search_radius(obs.block_matcher.settings, obs.task))
+        initial = init(obs, self.reuse)
+        self.stats["initial_computed"] = self.reuse.computed
         prior = obs.temporal
         hole = obs.observed <= 0
         if prior is None:
@@ -246,9 +227,13 @@ class _Frame:
         if len(first) < len(layers):
             # the rest of the layers where the scene changed or the static run has not yet its full mean
             # (max_frames measurements): on crops around those pixels (crop_layers)
-            young = self.state.age.to(obs.y.device) + 1 < self.settings.max_frames
-            state = run_later_layers(layers[len(first):], state, obs, ~self.static | young)
+            state = run_later_layers(layers[len(first):], state, obs, self.fresh)
         return state
+
+    def _alpha_kept(self, obs: Observation, dtype: torch.dtype) -> Optional[torch.Tensor]:
+        """This frame's α⁰ in depth units (the next frame's scale differs), or None."""
+        kept = None if self.reuse is None else self.reuse.kept
+        return None if kept is None else kept.to(dtype) * obs.scale.to(dtype).view(-1, 1, 1, 1)
 
     def _from_past(self, obs: Observation) -> torch.Tensor:
         """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""
@@ -264,28 +249,23 @@ class _Frame:
             x = x.detach()
             measured = obs.observed > 0
             trusted = measured & (state.q.detach() > 0)
-            one = trusted.to(x.dtype)
             conf = (state.confidence.detach() * obs.observed).to(x.dtype)
-            ymean = torch.where(measured, obs.denormalise(obs.y.detach()), torch.zeros_like(x))
             prior = obs.temporal
             if prior is None:
+                one = trusted.to(x.dtype)
+                ymean = torch.where(measured, obs.denormalise(obs.y.detach()), torch.zeros_like(x))
                 age, evidence, confidence, mean = torch.ones_like(one), one, conf, ymean
             else:
-                static, st = prior.static, self.state
-                age = torch.where(static, torch.clamp(st.age.to(x.dtype) + 1, max=s.max_frames),
-                                  torch.ones_like(one))
-                grown = torch.clamp(prior.evidence + 1, max=s.max_frames)
-                held = torch.where(measured, prior.evidence, prior.evidence * s.hole_decay)
-                run = static & ~prior.restarted
-                evidence = torch.where(run, torch.where(trusted, grown, held), one)
-                past_conf = st.confidence.to(x.dtype) * s.hole_decay
-                confidence = torch.where(measured, conf, torch.where(static, past_conf, torch.zeros_like(conf)))
-                mean = torch.where(measured, ymean, torch.where(static, st.mean.to(x.dtype), torch.zeros_like(x)))
-                self.stats["filled_from_past"] = float(self._from_past(obs).float().mean())
-                self.stats["static"] = float(static.float().mean())
-            matches = None
+                st = self.state
+                runs = grow_runs(obs.y.detach().to(x.dtype), obs.observed.to(x.dtype), trusted, conf, prior.static,
+                                 prior.restarted, prior.evidence.to(x.dtype), st.age.to(x.dtype),
+                                 st.confidence.to(x.dtype), st.mean.to(x.dtype), obs.offset, obs.scale, s)
+                age, evidence, confidence, mean = runs.age, runs.evidence, runs.confidence, runs.mean
+                self.stats["filled_from_past"], self.stats["static"] = runs.filled_from_past, runs.static
+            matches = weights = None
             if state.matches is not None:
                 matches = (state.matches.dist.detach(), state.matches.index.detach())
+                weights = (state.matches.weight.detach(), obs.block_matcher.temperature.detach().clone())
             rgb = None if obs.rgb is None else obs.rgb.detach()
             # the noise unit of the next change test: the local spread of the measurements about this estimate, and
             # where the scene stayed, of their change since the previous estimate (a sensor whose depth steps
@@ -300,7 +280,8 @@ class _Frame:
                 spread = torch.where(prior.static, torch.maximum(spread, remembered), spread)
             self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
                                     confidence=confidence, spread=spread, rgb=rgb, matches=matches,
-                                    departed=torch.zeros_like(x) if self.departed is None else self.departed)
+                                    departed=torch.zeros_like(x) if self.departed is None else self.departed,
+                                    alpha=self._alpha_kept(obs, x.dtype), match_weights=weights)
 
 
 DEFAULT_STREAM_MODEL = "denoise-fast"

@@ -1,0 +1,60 @@
+"""The stream's run updates: the numba kernels (stream/runs_kernel.py) give the torch path's maps bit for bit, on
+inputs that reach every branch (outliers in time, confirmed and held-out departures, holes with and without
+evidence, young and full runs)."""
+import pytest
+import torch
+
+from torch_depth_sr.config import StreamConfig
+from torch_depth_sr.stream import runs
+
+
+def _inputs(shape, dtype, seed):
+    g = torch.Generator().manual_seed(seed)
+
+    def r(*a):
+        return torch.rand(shape, generator=g, dtype=dtype)
+
+    offset = 500 + 100 * torch.rand(shape[0], generator=g, dtype=dtype)
+    scale = 20 + 10 * torch.rand(shape[0], generator=g, dtype=dtype)
+    depth = 400 + 300 * r()
+    y = (depth - offset.view(-1, 1, 1, 1)) / scale.view(-1, 1, 1, 1)
+    observed = (r() > 0.2).to(dtype)
+    y = y * observed
+    static = r() > 0.3
+    candidate = r() > 0.8
+    noise = 0.05 + 0.3 * r()
+    evidence = torch.where(r() > 0.3, torch.floor(9 * r()), 0.4 * r())  # whole counts, and decayed ones below 1
+    mean = torch.where(r() > 0.2, depth + 40 * (r() - 0.5), torch.zeros_like(depth))  # near y, far, or none
+    departed = torch.where(r() > 0.7, depth + 2 * (r() - 0.5), torch.zeros_like(depth))  # some confirm y
+    age = torch.floor(10 * r())
+    return y, observed, static, candidate, noise, evidence, mean, departed, age, offset, scale
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shape", [(1, 1, 1, 1), (1, 1, 3, 5), (2, 1, 37, 70)])
+@pytest.mark.parametrize("settings", [StreamConfig(), StreamConfig(outlier_test=None, weight=0.3, hole_decay=0.7)])
+def test_join_and_grow_kernels_equal_torch(monkeypatch, dtype, shape, settings):
+    args = _inputs(shape, dtype, sum(shape))
+    joined = runs.join_runs(*args, settings)
+    y, observed, static, _, _, evidence, mean, _, age, offset, scale = args
+    g = torch.Generator().manual_seed(7)
+    trusted = (observed > 0) & (torch.rand(shape, generator=g) > 0.1)
+    conf = torch.rand(shape, generator=g, dtype=dtype) * observed
+    past_conf = torch.rand(shape, generator=g, dtype=dtype)
+    grow = (joined.y, joined.observed, trusted, conf, static, joined.restarted, evidence, age, past_conf, mean, offset,
+            scale, settings)
+    grown = runs.grow_runs(*grow)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = runs.join_runs(*args, settings)
+    for name, a, b in zip(runs.JoinedRuns._fields, joined, ref):
+        assert a.dtype == b.dtype and a.shape == b.shape and torch.equal(a, b), name
+    ref_grown = runs.grow_runs(*grow)
+    for name, a, b in zip(runs.GrownRuns._fields, grown, ref_grown):
+        if isinstance(a, float):
+            assert a == pytest.approx(b, abs=1e-6), name  # shares: counted exactly, or a float32 mean
+        else:
+            assert a.dtype == b.dtype and torch.equal(a, b), name
+    if shape[-1] > 5 and settings.outlier_test is not None:  # every branch reached (none leaves an infinite test)
+        for name in ("outlier", "held_out", "averaged", "restarted", "fresh"):
+            flags = getattr(ref, name)
+            assert bool(flags.any()) and not bool(flags.all()), name
