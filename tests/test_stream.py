@@ -449,6 +449,17 @@ def test_kept_match_weights_are_the_softmax_again_and_skipped_when_the_temperatu
     # a learning temperature needs the softmax's gradient
     learning = StreamMatcher(m.block_matcher, kept, nothing, (stale, made_at))(obs.y, obs, obs.observed)
     assert learning.weight.requires_grad and torch.allclose(learning.weight, fresh.weight)
+    # some pixels fresh: the kept weights elsewhere, the softmax of the new lists on the crops, as without them (to
+    # the last bit of torch's vectorised exp, which a crop's layout can change)
+    some = nothing.clone()
+    some[..., 11:14, 17:30] = True
+    with torch.no_grad():
+        new = StreamMatcher(m.block_matcher, (kept[0].clone(), kept[1].clone()), some)(obs.y, obs, obs.observed)
+        cached = StreamMatcher(m.block_matcher, (kept[0].clone(), kept[1].clone()), some,
+                               (fresh.weight.clone(), made_at))(obs.y, obs, obs.observed)
+    assert torch.equal(cached.index, new.index) and torch.allclose(cached.weight, new.weight, rtol=1e-6, atol=1e-7)
+    outside = ~some.expand_as(new.weight)
+    assert torch.equal(cached.weight[outside], fresh.weight[outside])
 
 
 def test_kept_alpha_is_the_previous_one_where_nothing_is_fresh_and_exact_on_crops():

@@ -72,3 +72,33 @@ def test_the_kernel_gate_takes_the_torch_path_for_gradients_other_dtypes_and_the
     assert native.host_kernel("stream.change_kernel", "dilate_cpu", x > 0.5, dtypes=(torch.bool,)) is not None
     monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
     assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x) is None
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shape", [(1, 3, 1, 1), (2, 3, 5, 4), (1, 3, 40, 61)])
+def test_colour_changes_kernel_equals_torch(monkeypatch, dtype, shape):
+    g = torch.Generator().manual_seed(sum(shape))
+    rgb, previous = torch.rand(shape, generator=g, dtype=dtype), torch.rand(shape, generator=g, dtype=dtype)
+    previous = torch.where(torch.rand(shape, generator=g) > 0.5, rgb + 0.02, previous)  # near the test, and far
+    out = change.colour_changes(rgb, previous, 3, 0.03)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = change.colour_changes(rgb, previous, 3, 0.03)
+    assert torch.equal(out[0], ref[0]) and out[1].dtype == torch.bool and torch.equal(out[1], ref[1])
+    if shape[-1] > 4:
+        assert bool(ref[1].any()) and not bool(ref[1].all())
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shape,shift", [((1, 3, 5, 6), (0, 0)), ((2, 3, 40, 61), (1, -2)), ((1, 3, 90, 120), (0, 1))])
+def test_camera_moved_kernel_equals_torch_to_float32_rounding(monkeypatch, dtype, shape, shift):
+    """The kernel sums in float64 where torch's means sum float32 values: the ratios agree to float32 rounding."""
+    g = torch.Generator().manual_seed(sum(shape))
+    previous = torch.rand(shape, generator=g, dtype=dtype)
+    rgb = torch.roll(previous, shift, dims=(-2, -1)) + 0.01 * torch.rand(shape, generator=g, dtype=dtype)
+    out = change.camera_moved(rgb, previous)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = change.camera_moved(rgb, previous)
+    assert out.dtype == ref.dtype == dtype and out.shape == ref.shape
+    assert torch.allclose(out, ref, rtol=1e-5, atol=0)
+    if shift != (0, 0) and shape[-1] > 6:
+        assert bool((ref < 0.8).all())  # a shifted image: the camera moved

@@ -18,7 +18,7 @@ from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
 from .singular import detect_singular, supported_or_line
-from .stream.change import _nearest_distance as nearest_distance, depth_votes, local_spread
+from .stream.change import _nearest_distance as nearest_distance, camera_moved, colour_changes, depth_votes, local_spread
 from .stream.matching import dilate
 from .stream.runs import grow_runs, join_runs
 
@@ -80,6 +80,8 @@ def _warmup_steps(dtype: torch.dtype):
                 nearest_distance(x, trust, x.flip(-1), noise)
             dilate(x > 0.5, 2)
             depth_votes(x, trust, 3, 0.5)
+            colour_changes(rgb, rgb.flip(-1), 3, 0.03)
+            camera_moved(rgb, rgb.flip(-1))
 
     def stream_runs():  # a stream's run updates before and after the model
         s, b, one = StreamConfig(), x > 0.5, torch.ones(1, dtype=dtype)

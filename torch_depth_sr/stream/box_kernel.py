@@ -18,7 +18,7 @@ from numba import njit
 
 from ..native import run_range
 
-__all__ = ["box_mean_cpu"]
+__all__ = ["box_mean_cpu", "local_spread_cpu"]
 
 _BAND = 64  # columns per task of the column pass
 _MIN_ROWS = 16  # rows per task of the row pass below which one thread does it
@@ -85,3 +85,69 @@ def box_mean_cpu(v: torch.Tensor, window: int) -> torch.Tensor:
     bands = -(-w // _BAND)
     run_range(_columns, b * ch * bands, rows, window, bands, means)
     return torch.from_numpy(means).view(b, ch, h, w).to(v.dtype)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _spread_rows(t0, t1, y, observed, x, window, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·(C+1)·H`` rows of :func:`_rows`' sums of the planes ``local_spread`` boxes, made
+    on the fly: plane ``b·(C+1) + c`` holds ``|y − x_c|`` where observed (else 0) for ``c < C``, and the measured
+    pixels (1 or 0) for ``c = C``, each in the dtype first, as the torch path's planes."""
+    nc, h, w = x.shape[1], x.shape[2], x.shape[3]
+    p = window // 2
+    n = w + 2 * p + 1
+    c = np.empty(n)
+    one = consts[0]
+    for t in range(t0, t1):
+        plane = t // h
+        i = t - plane * h
+        b = plane // (nc + 1)
+        ch = plane - b * (nc + 1)
+        acc = 0.0
+        for k in range(n):
+            j = k - p - 1
+            if 0 <= j < w:
+                if observed[b, 0, i, j] > 0:
+                    v = abs(y[b, 0, i, j] - x[b, ch, i, j]) if ch < nc else one
+                    acc += np.float64(v)
+                else:
+                    acc += 0.0
+            else:
+                acc += 0.0
+            c[k] = acc
+        for j in range(w):
+            out[plane, i, j] = c[j + window] - c[j]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _spread_ratio(t0, t1, means, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·C·H`` rows: ``out`` = the mean of ``|y − x_c|`` over the mean of the measured
+    pixels, each rounded to the dtype first (0 where no pixel of the window is measured)."""
+    nc, h, w = out.shape[1], out.shape[2], out.shape[3]
+    r = np.empty(2, dtype=out.dtype)  # a store rounds the float64 mean to the dtype, as .to(dtype) does
+    for t in range(t0, t1):
+        plane = t // h
+        i = t - plane * h
+        b = plane // nc
+        ch = plane - b * nc
+        for j in range(w):
+            r[0] = means[b * (nc + 1) + ch, i, j]
+            r[1] = means[b * (nc + 1) + nc, i, j]
+            out[b, ch, i, j] = r[0] / max(r[1], consts[2]) if r[1] > 0 else consts[1]
+
+
+def local_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, window: int) -> torch.Tensor:
+    """``change.local_spread(y, observed, x, window)`` for ``y``, ``observed`` (B,1,H,W) and ``x`` (B,C,H,W) of one
+    float dtype on the CPU, no gradient: the same window sums in the same order (:func:`_rows`, :func:`_columns`)
+    of planes made on the fly, without the torch path's temporaries."""
+    b, nc, h, w = x.shape
+    arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, x)]
+    dtype = arrays[0].dtype
+    rows = np.empty((b * (nc + 1), h, w), dtype=np.float64)
+    consts = np.array([1.0, 0.0, 1e-12], dtype=dtype)  # one, zero, the torch path's clamp of the measured share
+    run_range(_spread_rows, b * (nc + 1) * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
+    means = np.empty_like(rows)
+    bands = -(-w // _BAND)
+    run_range(_columns, b * (nc + 1) * bands, rows, window, bands, means)
+    out = np.empty((b, nc, h, w), dtype=dtype)
+    run_range(_spread_ratio, b * nc * h, means, consts, out, min_share=_MIN_ROWS)
+    return torch.from_numpy(out)

@@ -28,6 +28,7 @@ once, as a first departure from the pixel's run, and starts a new run when the n
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple, Optional
 
 import torch
@@ -38,7 +39,8 @@ from ..native import host_kernel
 from ..selection import lower_median
 from .matching import dilate
 
-__all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "depth_votes", "distances", "local_spread"]
+__all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "colour_changes", "depth_votes", "distances",
+           "local_spread"]
 
 _PRIOR = 6.0  # pseudo-votes of "unchanged" per window
 
@@ -72,6 +74,11 @@ def _window_mean(v: torch.Tensor, window: int,
 def local_spread(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, window: int) -> torch.Tensor:
     """(B,C,H,W): the window mean of ``|y − x|`` over the measured pixels (0 where the window has none): the local
     noise of the measurements about the restored depth ``x`` (B,C,H,W: C estimates, a spread about each)."""
+    fits = (window % 2 == 1 and y.shape[1] == 1 and observed.shape == y.shape and x.shape[0] == y.shape[0]
+            and x.shape[-2:] == y.shape[-2:] and observed.dtype == x.dtype == y.dtype)
+    kernel = host_kernel("stream.box_kernel", "local_spread_cpu", y, observed, x) if fits else None
+    if kernel is not None:  # the same sums, the planes made on the fly
+        return kernel(y, observed, x, window)
     m = (observed > 0).to(y.dtype)
     num, den = _window_mean(torch.where(m > 0, (y - x).abs(), torch.zeros_like(x)), window, m)
     return torch.where(den > 0, num / den.clamp_min(1e-12), torch.zeros_like(num))
@@ -127,8 +134,17 @@ def depth_votes(d1: torch.Tensor, observed: torch.Tensor, window: int, threshold
 def camera_moved(rgb: torch.Tensor, previous: torch.Tensor, reach: int = 2) -> torch.Tensor:
     """(B,) the ratio of the smallest mean colour change over the frame after a shift of the previous image by up to
     ``reach`` px (not 0) to the mean change without a shift: well below 1 when the camera moved (the whole image
-    moved), about 1 or above when only some objects did, 1 when the image did not change at all."""
+    moved), about 1 or above when only some objects did, 1 when the image did not change at all. On the CPU the 25
+    means come from one pass of a numba kernel (:mod:`~torch_depth_sr.stream.change_kernel`) with float64 sums."""
     a, b = rgb.mean(1, keepdim=True), previous.mean(1, keepdim=True)
+    kernel = host_kernel("stream.change_kernel", "shift_changes_cpu", a, b) if min(a.shape[-2:]) > 2 * reach else None
+    if kernel is not None:
+        changes = kernel(a[:, 0], b[:, 0], reach)  # (B, (2·reach + 1)²) float64, the unshifted one in the middle
+        middle = changes.shape[1] // 2
+        still = changes[:, middle]
+        best = torch.cat([changes[:, :middle], changes[:, middle + 1:]], 1).min(1).values
+        ratio = torch.where(still > 1.0 / 255, best / still.clamp_min(1e-12), torch.ones_like(still))
+        return ratio.to(rgb.dtype)
     a = a - a.flatten(1).mean(1).view(-1, 1, 1, 1)
     b = b - b.flatten(1).mean(1).view(-1, 1, 1, 1)
     core = a[..., reach:-reach, reach:-reach]
@@ -151,10 +167,23 @@ def camera_moved(rgb: torch.Tensor, previous: torch.Tensor, reach: int = 2) -> t
 
 def color_change(rgb: torch.Tensor, previous: torch.Tensor, window: int) -> torch.Tensor:
     """(B,1,H,W): the window mean of the absolute colour change, each channel's median change removed."""
+    return colour_changes(rgb, previous, window)[0]
+
+
+def colour_changes(rgb: torch.Tensor, previous: torch.Tensor, window: int,
+                   test: float = math.inf) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`color_change`, and where each pixel's own mean absolute colour change (no median removed) exceeds
+    ``test`` (B,1,H,W) bool: one pass over the colour on the CPU (:mod:`~torch_depth_sr.stream.change_kernel`, the
+    same values)."""
     diff = rgb - previous
-    diff = diff - lower_median(diff.flatten(2))[..., None, None]
-    change = diff.abs().mean(1, keepdim=True)
-    return _box_mean(change, window) / _inside_share(change, window)
+    median = lower_median(diff.flatten(2))
+    kernel = host_kernel("stream.change_kernel", "colour_change_cpu", diff, median)
+    if kernel is not None:
+        change, own = kernel(diff, median, test)
+    else:
+        change = (diff - median[..., None, None]).abs().mean(1, keepdim=True)
+        own = diff.abs().mean(1, keepdim=True) > test
+    return _box_mean(change, window) / _inside_share(change, window), own
 
 
 def _inside_share(like: torch.Tensor, window: int) -> torch.Tensor:
@@ -177,6 +206,7 @@ class ChangeTest(NamedTuple):
     changed: torch.Tensor  # the window test, dilated: the pixel starts a new static run
     outlier: torch.Tensor  # in a static window, a measurement that matches no previous value near it
     seen: torch.Tensor  # the change as the colour alone sees it (dilated), or as changed without colour
+    own: Optional[torch.Tensor] = None  # the pixel's own mean colour change exceeds color_test (None: no colour)
 
 
 def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor, noise: torch.Tensor,
@@ -187,10 +217,11 @@ def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
     with torch.no_grad():
         d1 = _nearest_distance(y, observed, previous, noise)
         changed = depth_votes(d1, observed, settings.window, settings.depth_test) > 0.5
-        seen = None
+        seen = own = None
         if rgb is not None and previous_rgb is not None:
             previous_rgb = previous_rgb.to(rgb)
-            seen = dilate(color_change(rgb, previous_rgb, settings.window) > settings.color_test, settings.dilate)
+            colour, own = colour_changes(rgb, previous_rgb, settings.window, settings.color_test)
+            seen = dilate(colour > settings.color_test, settings.dilate)
             if settings.camera_test is not None and min(rgb.shape[-2:]) > 8:
                 moved = (camera_moved(rgb, previous_rgb) < settings.camera_test).view(-1, 1, 1, 1)
                 seen = seen | moved
@@ -198,5 +229,5 @@ def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
         changed = changed if seen is None else changed | seen
         seen = changed if seen is None else seen
         if settings.outlier_test is None:
-            return ChangeTest(changed, torch.zeros_like(changed), seen)
-        return ChangeTest(changed, ~changed & (d1 > settings.outlier_test), seen)
+            return ChangeTest(changed, torch.zeros_like(changed), seen, own)
+        return ChangeTest(changed, ~changed & (d1 > settings.outlier_test), seen, own)

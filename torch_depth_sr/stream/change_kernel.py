@@ -23,7 +23,7 @@ from numba import njit
 
 from ..native import run_range
 
-__all__ = ["dilate_cpu", "nearest_distance_cpu", "votes_cpu"]
+__all__ = ["colour_change_cpu", "dilate_cpu", "nearest_distance_cpu", "shift_changes_cpu", "votes_cpu"]
 
 _BAND = 64  # columns per task of the dilation's column pass
 _MIN_ROWS = 16  # rows per task below which one thread does them
@@ -151,3 +151,76 @@ def votes_cpu(d1: torch.Tensor, observed: torch.Tensor, threshold: float, window
     consts = np.array([window * window, prior, window * window], dtype=dtype)
     run_range(_votes, b * h, counts, consts, out, min_share=_MIN_ROWS)
     return torch.from_numpy(out).view(b, 1, h, w)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _colour(t0, t1, diff, median, consts, change, own):
+    """Rows ``[t0, t1)`` of the ``B·H`` rows: ``change`` = the mean over the channels of ``|diff − median|`` (each
+    channel's median change removed), ``own`` = the mean of ``|diff|`` above ``consts[1]``; ``consts = [channels,
+    test]`` in the dtype. The channels summed in order, then divided: torch's ``abs().mean(1)``."""
+    h, w, nc = diff.shape[2], diff.shape[3], diff.shape[1]
+    n, test = consts[0], consts[1]
+    for t in range(t0, t1):
+        b = t // h
+        i = t - b * h
+        for j in range(w):
+            d = diff[b, 0, i, j]
+            s = abs(d - median[b, 0])
+            r = abs(d)
+            for c in range(1, nc):
+                d = diff[b, c, i, j]
+                s += abs(d - median[b, c])
+                r += abs(d)
+            change[b, i, j] = s / n
+            own[b, i, j] = r / n > test
+
+
+def colour_change_cpu(diff: torch.Tensor, median: torch.Tensor, test: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """``((diff − median).abs().mean(1, keepdim=True), diff.abs().mean(1, keepdim=True) > test)`` for ``diff``
+    (B,C,H,W) and ``median`` (B,C) of one float dtype on the CPU, no gradient."""
+    b, nc, h, w = diff.shape
+    d = np.ascontiguousarray(diff.detach().numpy())
+    m = np.ascontiguousarray(median.detach().reshape(b, nc).numpy(), dtype=d.dtype)
+    change = np.empty((b, h, w), dtype=d.dtype)
+    own = np.empty((b, h, w), dtype=np.bool_)
+    run_range(_colour, b * h, d, m, np.array([nc, test], dtype=d.dtype), change, own, min_share=_MIN_ROWS)
+    return torch.from_numpy(change).view(b, 1, h, w), torch.from_numpy(own).view(b, 1, h, w)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", fastmath={"reassoc"})
+def _shifts(t0, t1, a, b, centre, reach, out):
+    """Rows ``[t0, t1)`` of the ``B·(H − 2·reach)`` rows of the core: ``out[t, s]`` = the row's sum (float64) of
+    ``|(a − centre_a) − (b_shifted − centre_b)|`` for each shift ``s`` of ``(dy, dx)`` in ``[-reach, reach]²``
+    (row-major). The sums may be reassociated (vectorised): not bit for bit any fixed order."""
+    h, w = a.shape[1], a.shape[2]
+    rows = h - 2 * reach
+    side = 2 * reach + 1
+    for t in range(t0, t1):
+        n = t // rows
+        i = t - n * rows + reach
+        offset = centre[n, 1] - centre[n, 0]  # b's centre minus a's
+        core = w - 2 * reach
+        ar = a[n, i, reach:w - reach]
+        for s in range(side * side):
+            dy = s // side - reach
+            dx = s - (s // side) * side - reach
+            br = b[n, i + dy, reach + dx:reach + dx + core]
+            acc = 0.0
+            for j in range(core):
+                acc += abs(np.float64(ar[j]) - np.float64(br[j]) + offset)
+            out[t, s] = acc
+
+
+def shift_changes_cpu(a: torch.Tensor, b: torch.Tensor, reach: int) -> torch.Tensor:
+    """(B, (2·reach + 1)²) float64: ``camera_moved``'s mean absolute changes of the centred images ``a``, ``b`` (B,H,W)
+    (H, W > 2·reach) over the core, for each shift of ``b``, row-major from (−reach, −reach). One pass over the
+    core rows with the sums in float64 (torch's float32 means differ from them in the last bits)."""
+    n, h, w = a.shape
+    x = np.ascontiguousarray(a.detach().numpy())
+    y = np.ascontiguousarray(b.detach().numpy(), dtype=x.dtype)
+    centre = np.stack([x.reshape(n, -1).mean(1, dtype=np.float64), y.reshape(n, -1).mean(1, dtype=np.float64)], 1)
+    rows = h - 2 * reach
+    out = np.empty((n * rows, (2 * reach + 1) ** 2))
+    run_range(_shifts, n * rows, x, y, centre, reach, out, min_share=_MIN_ROWS)
+    count = rows * (w - 2 * reach)
+    return torch.from_numpy(out.reshape(n, rows, -1).sum(1) / count)

@@ -78,7 +78,10 @@ class StreamMatcher:
     """The model's :class:`~torch_depth_sr.stages.BlockMatcher` (``inner``) for one stream frame: the matches
     ``previous`` (the previous frame's last, ``(dist, index)`` without gradient) are kept where ``fresh`` (B,1,H,W)
     is False; the pixels where it is True are searched by ``inner`` on bands of rows. It stands where the model's
-    matcher stands (``obs.block_matcher``): x⁰'s matches (a call) and a scheduled layer's (:meth:`rematch`)."""
+    matcher stands (``obs.block_matcher``): x⁰'s matches (a call) and a scheduled layer's (:meth:`rematch`).
+    ``weights``: the previous matches' softmax weights and the temperature they were made at, kept where nothing is
+    searched when the temperature is the same and no gradient is wanted. The first call writes into ``previous``
+    (and ``weights``); later calls into copies."""
 
     def __init__(self, inner: BlockMatcher, previous: tuple[torch.Tensor, torch.Tensor], fresh: torch.Tensor,
                  weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None):
@@ -88,6 +91,7 @@ class StreamMatcher:
         # the previous matches' weights and the temperature they were made at: with nothing fresh, the same
         # temperature and no gradient wanted, the softmax would give them again bit for bit
         self.previous_weights = weights
+        self._owned = True  # the kept lists may be written in place (the frame's first call)
         self.searched = 0  # pixels searched (crops included), summed over the calls of this frame
 
     # the matcher's interface as the model's stages read it
@@ -122,40 +126,50 @@ class StreamMatcher:
     def _mix(self, x: torch.Tensor, obs: Observation, q: torch.Tensor,
              previous: Optional[BlockMatches]) -> BlockMatches:
         dist, index = self.previous_dist.to(x.dtype), self.previous_index
-        fresh = bool(self.fresh.any())
-        if not fresh and self._weights_hold(dist):
-            return BlockMatches(dist.detach(), index, self.previous_weights[0])
-        if fresh:
-            h, w = x.shape[-2:]
-            s = self.settings
-            window, k = s.window_and_k()[obs.task]
-            k_full = min(k, candidates_everywhere(h, w, window, s.include_self))
-            boxes = crops(self.fresh, search_radius(s, obs.task))
-            area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
-            thin = any(min(k, candidates_everywhere(r.stop - r.start, c.stop - c.start, window, s.include_self))
-                       != k_full for r, c, _, _ in boxes)
-            if area >= 0.8 * h * w or thin:  # nearly everything, or a crop too small for k candidates: whole image
-                full = slice(0, h), slice(0, w)
-                boxes = [(*full, *full)]
+        weights = self.previous_weights[0] if self._weights_hold(dist) else None
+        if not bool(self.fresh.any()):
+            return finish(dist.detach(), index, self.temperature) if weights is None else BlockMatches(dist, index, weights)
+        h, w = x.shape[-2:]
+        s = self.settings
+        window, k = s.window_and_k()[obs.task]
+        k_full = min(k, candidates_everywhere(h, w, window, s.include_self))
+        boxes = crops(self.fresh, search_radius(s, obs.task))
+        area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
+        thin = any(min(k, candidates_everywhere(r.stop - r.start, c.stop - c.start, window, s.include_self))
+                   != k_full for r, c, _, _ in boxes)
+        if area >= 0.8 * h * w or thin:  # nearly everything, or a crop too small for k candidates: whole image
+            full = slice(0, h), slice(0, w)
+            boxes = [(*full, *full)]
+        # the frame's first call writes into the kept lists (the previous frame needs them no more: a whole frame's
+        # copy of k planes cost more than its search of a few crops at 1.5 MP); a later one (a re-matching layer)
+        # into a copy, so that the matches an earlier call returned stay as they were
+        if not self._owned:
             dist, index = dist.clone(), index.clone()
-            q_full = q if q.shape[-2:] == (h, w) else None
-            for rows, cols, core_r, core_c in boxes:
-                crop_obs = replace(obs, rgb=None if obs.rgb is None else obs.rgb[..., rows, cols])
-                crop_q = q_full[..., rows, cols] if q_full is not None else q
-                prev = None if previous is None else crop_matches(previous, rows, cols, w)
-                m = self._search(x[..., rows, cols], crop_obs, crop_q, prev)
-                self.searched += (rows.stop - rows.start) * (cols.stop - cols.start)
-                wc = cols.stop - cols.start
-                inner = (slice(core_r.start - rows.start, core_r.stop - rows.start),
-                         slice(core_c.start - cols.start, core_c.stop - cols.start))
-                found = m.index[..., inner[0], inner[1]]
-                found = (found // wc + rows.start) * w + found % wc + cols.start  # back to the whole image
-                fresh = self.fresh[..., core_r, core_c]
-                dist[..., core_r, core_c] = torch.where(fresh, m.dist[..., inner[0], inner[1]].to(dist.dtype),
-                                                        dist[..., core_r, core_c])
-                index[..., core_r, core_c] = torch.where(fresh, found, index[..., core_r, core_c])
-        return finish(dist.detach(), index, self.temperature)  # the weights at the current temperature (it learns)
-
+            weights = None if weights is None else weights.clone()
+        self._owned = False
+        q_full = q if q.shape[-2:] == (h, w) else None
+        for rows, cols, core_r, core_c in boxes:
+            crop_obs = replace(obs, rgb=None if obs.rgb is None else obs.rgb[..., rows, cols])
+            crop_q = q_full[..., rows, cols] if q_full is not None else q
+            prev = None if previous is None else crop_matches(previous, rows, cols, w)
+            m = self._search(x[..., rows, cols], crop_obs, crop_q, prev)
+            self.searched += (rows.stop - rows.start) * (cols.stop - cols.start)
+            wc = cols.stop - cols.start
+            inner = (slice(core_r.start - rows.start, core_r.stop - rows.start),
+                     slice(core_c.start - cols.start, core_c.stop - cols.start))
+            found = m.index[..., inner[0], inner[1]]
+            found = (found // wc + rows.start) * w + found % wc + cols.start  # back to the whole image
+            fresh = self.fresh[..., core_r, core_c]
+            dist[..., core_r, core_c] = torch.where(fresh, m.dist[..., inner[0], inner[1]].to(dist.dtype),
+                                                    dist[..., core_r, core_c])
+            index[..., core_r, core_c] = torch.where(fresh, found, index[..., core_r, core_c])
+            if weights is not None:  # the softmax is per pixel: the core's is the whole frame's (to the last bit
+                # of torch's vectorised exp, which the layout can change)
+                core = finish(dist[..., core_r, core_c], index[..., core_r, core_c], self.temperature).weight
+                weights[..., core_r, core_c] = torch.where(fresh, core, weights[..., core_r, core_c])
+        if weights is None:
+            return finish(dist.detach(), index, self.temperature)  # the weights at the current temperature (it learns)
+        return BlockMatches(dist.detach(), index, weights)
 
     def _weights_hold(self, dist: torch.Tensor) -> bool:
         """Whether the previous weights are what :func:`finish` would give for ``dist`` now."""
@@ -165,7 +179,8 @@ class StreamMatcher:
         t = self.temperature
         if t.requires_grad and torch.is_grad_enabled():  # the weights must carry the temperature's gradient
             return False
-        return weight.dtype == dist.dtype and weight.shape == dist.shape and torch.equal(made_at, t.detach().to(made_at))
+        return (weight.dtype == dist.dtype and weight.shape == dist.shape
+                and torch.equal(made_at, t.detach().to(made_at)))
 
 
 def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:

@@ -178,9 +178,8 @@ class _Frame:
         noise = torch.maximum(st.spread.to(dt) / scale, floor)
         test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s)
         static = ~test.changed
-        if obs.rgb is not None and st.rgb is not None:  # a hole has no depth to test: its own colour must not change
-            own = (obs.rgb - st.rgb.to(obs.rgb)).abs().mean(1, keepdim=True) > s.color_test
-            static = static & ~(own & (obs.observed <= 0))
+        if test.own is not None:  # a hole has no depth to test: its own colour must not change
+            static = static & ~(test.own & (obs.observed <= 0))
         evidence = st.evidence.to(dt)
         runs = join_runs(obs.y, obs.observed, static, test.outlier, noise, evidence, st.mean.to(dt),
                          st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
