@@ -37,3 +37,21 @@ def test_local_spread_kernel_equals_torch(monkeypatch, dtype, shape, channels, w
     monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
     ref = local_spread(y, observed, x, window)
     assert out.dtype == dtype and out.shape == ref.shape and torch.equal(out, ref)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("shape,window", [((1, 1, 1, 1), 3), ((2, 1, 6, 5), 7), ((1, 1, 40, 150), 7)])
+def test_remembered_spread_kernel_equals_torch(monkeypatch, dtype, shape, window):
+    from torch_depth_sr.stream.change import remembered_spread
+
+    g = torch.Generator().manual_seed(window + sum(shape))
+    observed = (torch.rand(shape, generator=g) > 0.3).to(dtype)
+    observed[..., :3, :3] = 0
+    y = 1000 * torch.rand(shape, generator=g, dtype=dtype) * observed
+    x, past = y + torch.randn(shape, generator=g, dtype=dtype), y + 3 * torch.randn(shape, generator=g, dtype=dtype)
+    past_spread = 4 * torch.rand(shape, generator=g, dtype=dtype)
+    static = torch.rand(shape, generator=g) > 0.4
+    out = remembered_spread(y, observed, x, past, past_spread, static, window, 0.9)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = remembered_spread(y, observed, x, past, past_spread, static, window, 0.9)
+    assert out.dtype == dtype and out.shape == ref.shape and torch.equal(out, ref)

@@ -102,3 +102,15 @@ def test_camera_moved_kernel_equals_torch_to_float32_rounding(monkeypatch, dtype
     assert torch.allclose(out, ref, rtol=1e-5, atol=0)
     if shift != (0, 0) and shape[-1] > 6:
         assert bool((ref < 0.8).all())  # a shifted image: the camera moved
+
+
+@pytest.mark.parametrize("where", [(), ((3, 4),), ((0, 0), (2, 70)), ((55, 140), (57, 149))])
+@pytest.mark.parametrize("radius", [1, 4])
+def test_dilate_kernel_of_a_sparse_mask_equals_torch(monkeypatch, where, radius):
+    """Mostly empty masks (a stream's): the kernel counts only the box around the set pixels."""
+    mask = torch.zeros(2, 1, 60, 150, dtype=torch.bool)
+    for i, (r, c) in enumerate(where):
+        mask[i % 2, 0, r, c] = True
+    out = matching.dilate(mask, radius)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    assert torch.equal(out, matching.dilate(mask, radius))

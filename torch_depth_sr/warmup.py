@@ -18,7 +18,8 @@ from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
 from .nonlocal_prior import nonlocal_terms
 from .operators import grad
 from .singular import detect_singular, supported_or_line
-from .stream.change import _nearest_distance as nearest_distance, camera_moved, colour_changes, depth_votes, local_spread
+from .stream.change import _nearest_distance as nearest_distance
+from .stream.change import camera_moved, colour_changes, depth_votes, local_spread, remembered_spread
 from .stream.matching import dilate
 from .stream.runs import grow_runs, join_runs
 
@@ -73,6 +74,7 @@ def _warmup_steps(dtype: torch.dtype):
     def stream_means():  # a stream's window means (its change test and state), in the frames' dtype
         with torch.no_grad():
             local_spread(x, trust, x, 3)
+            remembered_spread(x, trust, x, x.flip(-1), x, x > 0.5, 3, 0.9)
 
     def stream_change():  # the change test's nearest distances (noise per pixel and per sample), votes, dilation
         with torch.no_grad():

@@ -18,7 +18,7 @@ from numba import njit
 
 from ..native import run_range
 
-__all__ = ["box_mean_cpu", "local_spread_cpu"]
+__all__ = ["box_mean_cpu", "local_spread_cpu", "remembered_spread_cpu"]
 
 _BAND = 64  # columns per task of the column pass
 _MIN_ROWS = 16  # rows per task of the row pass below which one thread does it
@@ -150,4 +150,76 @@ def local_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, w
     run_range(_columns, b * (nc + 1) * bands, rows, window, bands, means)
     out = np.empty((b, nc, h, w), dtype=dtype)
     run_range(_spread_ratio, b * nc * h, means, consts, out, min_share=_MIN_ROWS)
+    return torch.from_numpy(out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _pair_rows(t0, t1, y, observed, x, past, window, consts, out):
+    """:func:`_spread_rows` of the planes ``[x, past]`` (B,1,H,W) each, as ``local_spread`` of their concatenation
+    makes them, without the concatenation."""
+    h, w = x.shape[2], x.shape[3]
+    p = window // 2
+    n = w + 2 * p + 1
+    c = np.empty(n)
+    one = consts[0]
+    for t in range(t0, t1):
+        plane = t // h
+        i = t - plane * h
+        b = plane // 3
+        ch = plane - b * 3
+        acc = 0.0
+        for k in range(n):
+            j = k - p - 1
+            if 0 <= j < w and observed[b, 0, i, j] > 0:
+                if ch == 0:
+                    v = abs(y[b, 0, i, j] - x[b, 0, i, j])
+                elif ch == 1:
+                    v = abs(y[b, 0, i, j] - past[b, 0, i, j])
+                else:
+                    v = one
+                acc += np.float64(v)
+            else:
+                acc += 0.0
+            c[k] = acc
+        for j in range(w):
+            out[plane, i, j] = c[j + window] - c[j]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _remember(t0, t1, means, past_spread, static, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·H`` rows: the spread about ``x`` and about ``past`` from the window means (as
+    :func:`_spread_ratio`), then where ``static`` the larger of the spread and the remembered one: the larger of the
+    spread about ``past`` and ``consts[3]`` times ``past_spread``."""
+    h, w = out.shape[2], out.shape[3]
+    r = np.empty(3, dtype=out.dtype)
+    floor, zero, memory = consts[2], consts[1], consts[3]
+    for t in range(t0, t1):
+        b = t // h
+        i = t - b * h
+        for j in range(w):
+            r[0] = means[3 * b, i, j]
+            r[1] = means[3 * b + 1, i, j]
+            r[2] = means[3 * b + 2, i, j]
+            spread = r[0] / max(r[2], floor) if r[2] > 0 else zero
+            if static[b, 0, i, j]:
+                innovation = r[1] / max(r[2], floor) if r[2] > 0 else zero
+                remembered = max(innovation, memory * past_spread[b, 0, i, j])
+                spread = max(spread, remembered)
+            out[b, 0, i, j] = spread
+
+
+def remembered_spread_cpu(y, observed, x, past, past_spread, static, window: int, memory: float) -> torch.Tensor:
+    """``change.remembered_spread`` for (B,1,H,W) CPU tensors of one float dtype (``static`` bool), no gradient."""
+    b, _, h, w = x.shape
+    arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, x, past)]
+    dtype = arrays[0].dtype
+    consts = np.array([1.0, 0.0, 1e-12, memory], dtype=dtype)  # one, zero, the measured share's clamp, the memory
+    rows = np.empty((b * 3, h, w), dtype=np.float64)
+    run_range(_pair_rows, b * 3 * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
+    means = np.empty_like(rows)
+    bands = -(-w // _BAND)
+    run_range(_columns, b * 3 * bands, rows, window, bands, means)
+    out = np.empty((b, 1, h, w), dtype=dtype)
+    run_range(_remember, b * h, means, np.ascontiguousarray(past_spread.detach().numpy()),
+              np.ascontiguousarray(static.detach().numpy()), consts, out, min_share=_MIN_ROWS)
     return torch.from_numpy(out)

@@ -28,6 +28,7 @@ once, as a first departure from the pixel's run, and starts a new run when the n
 """
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple, Optional
 
@@ -40,7 +41,7 @@ from ..selection import lower_median
 from .matching import dilate
 
 __all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "colour_changes", "depth_votes", "distances",
-           "local_spread"]
+           "local_spread", "remembered_spread"]
 
 _PRIOR = 6.0  # pseudo-votes of "unchanged" per window
 
@@ -82,6 +83,24 @@ def local_spread(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, windo
     m = (observed > 0).to(y.dtype)
     num, den = _window_mean(torch.where(m > 0, (y - x).abs(), torch.zeros_like(x)), window, m)
     return torch.where(den > 0, num / den.clamp_min(1e-12), torch.zeros_like(num))
+
+
+def remembered_spread(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, past: torch.Tensor,
+                      past_spread: torch.Tensor, static: torch.Tensor, window: int, memory: float) -> torch.Tensor:
+    """(B,1,H,W): the noise unit a stream keeps for its next change test. :func:`local_spread` about the estimate
+    ``x``, and where ``static`` at least the spread about the previous estimate ``past`` (how far the measurements
+    moved since: a sensor whose depth steps between levels far away moves more from frame to frame than about any
+    one estimate) and ``memory`` times the previous unit ``past_spread``. All (B,1,H,W) of one dtype, ``static``
+    bool; on the CPU one numba pass without temporaries (:mod:`~torch_depth_sr.stream.box_kernel`, the same values)."""
+    maps = (y, observed, x, past, past_spread)
+    fits = window % 2 == 1 and all(t.shape == x.shape and t.dtype == x.dtype for t in maps) and x.shape[1] == 1
+    kernel = host_kernel("stream.box_kernel", "remembered_spread_cpu", *maps) if fits else None
+    if kernel is not None:
+        return kernel(y, observed, x, past, past_spread, static, window, memory)
+    both = local_spread(y, observed, torch.cat([x, past], 1), window)
+    spread, innovation = both[:, :1], both[:, 1:]
+    remembered = torch.maximum(innovation, memory * past_spread)
+    return torch.where(static, torch.maximum(spread, remembered), spread)
 
 
 def distances(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
@@ -189,15 +208,19 @@ def colour_changes(rgb: torch.Tensor, previous: torch.Tensor, window: int,
 def _inside_share(like: torch.Tensor, window: int) -> torch.Tensor:
     """(1,1,H,W): the share of each pixel's window that lies in the image, as ``_box_mean`` of ones gives it (the
     count of in-image pixels over ``window²``, one rounding to ``like``'s dtype): from the rows' and columns' counts,
-    not a box filter of a plane of ones."""
-    h, w = like.shape[-2:]
+    not a box filter of a plane of ones. The same for every frame of a stream: kept per size (a read-only plane)."""
+    return _inside_share_of(*like.shape[-2:], window, like.dtype, like.device)
+
+
+@functools.lru_cache(maxsize=8)
+def _inside_share_of(h: int, w: int, window: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
     p = window // 2
 
     def inside(n):  # per position along an axis: the window's positions in [0, n)
-        i = torch.arange(n, device=like.device)
+        i = torch.arange(n, device=device)
         return (torch.clamp(i + p + 1, max=n) - torch.clamp(i - p, min=0)).to(torch.float64)
 
-    return (inside(h)[:, None] * inside(w)[None, :] / (window * window)).to(like.dtype).view(1, 1, h, w)
+    return (inside(h)[:, None] * inside(w)[None, :] / (window * window)).to(dtype).view(1, 1, h, w)
 
 
 class ChangeTest(NamedTuple):

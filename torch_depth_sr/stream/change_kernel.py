@@ -117,8 +117,22 @@ def _window_counts(planes: torch.Tensor, radius: int) -> np.ndarray:
 
 
 def dilate_cpu(mask: torch.Tensor, radius: int) -> torch.Tensor:
-    """``dilate(mask, radius)`` of a (B,C,H,W) bool mask on the CPU: grown by a square of ``radius`` px."""
-    return torch.from_numpy(_window_counts(mask, radius) > 0).view(mask.shape)
+    """``dilate(mask, radius)`` of a (B,C,H,W) bool mask on the CPU: grown by a square of ``radius`` px. Only the
+    box around the set pixels, grown by ``radius``, is counted (a stream's masks are mostly empty): nothing outside
+    it is within ``radius`` of a set pixel."""
+    h, w = mask.shape[-2:]
+    rows = torch.nonzero(mask.any(-1).flatten(0, -2).any(0)).flatten()
+    if rows.numel() == 0:
+        return torch.zeros_like(mask)
+    cols = torch.nonzero(mask.any(-2).flatten(0, -2).any(0)).flatten()
+    r0, r1 = max(0, int(rows[0]) - radius), min(h, int(rows[-1]) + radius + 1)
+    c0, c1 = max(0, int(cols[0]) - radius), min(w, int(cols[-1]) + radius + 1)
+    if (r1 - r0) * (c1 - c0) >= h * w // 2:
+        return torch.from_numpy(_window_counts(mask, radius) > 0).view(mask.shape)
+    out = torch.zeros_like(mask)
+    box = mask[..., r0:r1, c0:c1]
+    out[..., r0:r1, c0:c1] = torch.from_numpy(_window_counts(box.contiguous(), radius) > 0).view(box.shape)
+    return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

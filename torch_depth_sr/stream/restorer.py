@@ -43,7 +43,7 @@ from ..model import DepthRestorer, NoiseSigma, _check_fill, _check_model_input, 
 from ..observation import Observation
 from ..state import RestorationState
 from ..terms import TemporalPriorTerm
-from .change import change_test, local_spread
+from .change import change_test, local_spread, remembered_spread
 from .crop_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
 from .runs import grow_runs, join_runs
@@ -273,10 +273,8 @@ class _Frame:
             if prior is None:
                 spread = local_spread(obs.raw, obs.observed, x, 2 * s.window + 1)
             else:
-                both = local_spread(obs.raw, obs.observed, torch.cat([x, self.state.depth.to(x)], 1), 2 * s.window + 1)
-                spread, innovation = both[:, :1], both[:, 1:]
-                remembered = torch.maximum(innovation, SPREAD_MEMORY * self.state.spread.to(x.dtype))
-                spread = torch.where(prior.static, torch.maximum(spread, remembered), spread)
+                spread = remembered_spread(obs.raw, obs.observed, x, self.state.depth.to(x), self.state.spread.to(x),
+                                           prior.static, 2 * s.window + 1, SPREAD_MEMORY)
             self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
                                     confidence=confidence, spread=spread, rgb=rgb, matches=matches,
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed,
