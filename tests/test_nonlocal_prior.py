@@ -45,3 +45,17 @@ def test_shape_error():
         nonlocal_gradient(torch.zeros(2, 2, 9, 10, dtype=torch.float64), bad)
     with pytest.raises(ShapeError, match="must share"):
         nonlocal_gradient(torch.zeros(2, 2, 8, 10, dtype=torch.float64), m)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_kernel_gives_nonlocal_terms_alpha_bit_for_bit_and_the_torch_path_to_rounding(monkeypatch, dtype):
+    """α alone (x⁰'s α⁰): the numba kernel sums as nonlocal_terms' kernel does; the torch path sums in the dtype."""
+    from torch_depth_sr.nonlocal_prior import nonlocal_terms
+    from torch_depth_sr.operators import grad
+
+    x = torch.rand(2, 1, 23, 31, generator=torch.Generator().manual_seed(3), dtype=dtype)
+    m = block_match(x, None, None, block_size=3, search_window=7, k=5)
+    alpha = nonlocal_gradient(grad(x), m)
+    assert alpha.dtype == dtype and torch.equal(alpha, nonlocal_terms(x, grad(x), m)[0])
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    torch.testing.assert_close(nonlocal_gradient(grad(x), m), alpha)

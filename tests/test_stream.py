@@ -462,48 +462,6 @@ def test_kept_match_weights_are_the_softmax_again_and_skipped_when_the_temperatu
     assert torch.equal(cached.weight[outside], fresh.weight[outside])
 
 
-def test_kept_alpha_is_the_previous_one_where_nothing_is_fresh_and_exact_on_crops():
-    from torch_depth_sr.initial import _alpha
-    from torch_depth_sr.observation import observe
-    from torch_depth_sr.operators import Identity
-    from torch_depth_sr.stream.warm_start import WarmStart
-
-    m = DepthRestorer(block_matching={"search_window": 7, "k": 6})
-    gt, rgb = _scene()
-    y = torch.from_numpy(_noisy(gt, 0, holes=0.0).astype(np.float32))[None, None]
-    obs = observe(y, torch.ones_like(y), torch.from_numpy(rgb)[None], Identity(), None, True, m.block_matcher, False)
-    matches = m.block_matcher(obs.y, obs, obs.observed)
-    whole = _alpha(obs.y, matches)
-    previous = torch.full_like(whole, 7.0)
-    nothing = torch.zeros_like(y, dtype=torch.bool)
-    w = WarmStart(previous, nothing, reach=4)
-    assert torch.equal(w.alpha(_alpha, obs.y, matches), previous) and w.computed == 0.0
-    assert torch.equal(w.kept, previous)
-    fresh = nothing.clone()
-    fresh[..., 14:16, 30:33] = True
-    w = WarmStart(previous, fresh, reach=4)
-    out = w.alpha(_alpha, obs.y, matches)
-    near = torch.zeros_like(fresh)
-    near[..., 14 - 5:16 + 5, 30 - 5:33 + 5] = True  # the fresh pixels and every pixel whose matches reach them
-    assert torch.equal(out[near.expand_as(out)], whole[near.expand_as(out)])  # the crop gives them exactly
-    assert torch.equal(out[~near.expand_as(out)], previous[~near.expand_as(out)])
-    assert 0.0 < w.computed < 0.8
-    assert torch.equal(WarmStart(None, fresh, reach=4).alpha(_alpha, obs.y, matches), whole)  # no past: computed
-
-
-def test_a_static_stream_keeps_alpha_and_stays_close_to_computing_it():
-    gt, rgb = _scene()
-    m = small_model(stream={"layers": 1, "max_frames": 3})
-    on, off = StreamRestorer(m), StreamRestorer(m, {"reuse_initial": False})
-    frames = [_noisy(gt, t).astype(np.float32) for t in range(7)]  # float: the output is not rounded to mm
-    for d in frames:
-        a = on.step(d, rgb, return_details=True)
-        b = off.step(d, rgb, return_details=True)
-    assert a.info["stream"]["initial_computed"] == 0.0 and b.info["stream"]["initial_computed"] == 1.0
-    diff = np.abs(a.depth.astype(np.float64) - b.depth.astype(np.float64))
-    assert 0.0 < diff.max() < 1.0, diff.max()  # α⁰ one frame old: a fraction of the noise (σ 6 mm)
-
-
 def test_recordings_factory_streams_and_replays(tmp_path):
     import cv2
 

@@ -15,15 +15,14 @@ from .config import InitConfig, RestorerConfig, SidedFill, UpsamplingConfig
 from .fill import fill_holes, fill_holes_sided
 from .guided_filters import domain_transform_filter, joint_bilateral_filter
 from .native import host_path
-from .nonlocal_prior import nonlocal_terms
+from .nonlocal_prior import nonlocal_gradient
 from .observation import Observation
 from .operators import area_downsample, grad
 from .stages import SingularDetector
 from .state import RestorationState
 from .upsampling import UpsamplingReference, bounded_upsample, upsampling_reference
 
-__all__ = ["COLD", "ColdStart", "DenoiseInit", "InitialEstimate", "UpsampleInit", "initial_estimate",
-           "initial_stages"]
+__all__ = ["DenoiseInit", "InitialEstimate", "UpsampleInit", "initial_estimate", "initial_stages"]
 
 
 def initial_estimate(yn: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], factor: int,
@@ -86,19 +85,6 @@ _FILLS = {"pushpull": _push_pull, "domain": _domain_transform, "jbf": _joint_bil
 """x⁰'s fill of the holes per ``InitConfig.fill``: ``(estimate, guide on the depth's grid or None)``."""
 
 
-class ColdStart:
-    """How x⁰'s α⁰ (the nonlocal mean of x⁰'s gradients, a pass over every pixel's matches) is made in a frame on its
-    own: computed on the whole frame. A stream frame passes a :class:`~torch_depth_sr.stream.warm_start.WarmStart`
-    instead, which keeps the previous frame's α⁰ where the scene stayed."""
-
-    def alpha(self, compute, x0: torch.Tensor, matches) -> torch.Tensor:
-        """``compute(x0, matches)``: α⁰ (B,2,h,w)."""
-        return compute(x0, matches)
-
-
-COLD = ColdStart()
-
-
 class InitialEstimate(NamedTuple):
     """What the initial stage returns: the state before the first layer, and what later stages read."""
 
@@ -135,14 +121,13 @@ class _Initial(nn.Module):
         return self._keep(obs, guided)
 
     def start(self, x0: torch.Tensor, obs: Observation, q: torch.Tensor, conf: torch.Tensor,
-              clean: Optional[torch.Tensor], reuse: ColdStart = COLD) -> RestorationState:
-        """The state at x⁰: its matches (untrusted = unmeasured pixels masked) and α⁰ when the layers need them
-        (``reuse``: how α⁰ is made, :class:`ColdStart`)."""
+              clean: Optional[torch.Tensor]) -> RestorationState:
+        """The state at x⁰: its matches (untrusted = unmeasured pixels masked) and α⁰ when the layers need them."""
         zeros2 = x0.new_zeros(x0.shape[0], 2, *x0.shape[-2:])
         matches = self._match(x0, obs)
-        alpha = reuse.alpha(self._alpha, x0, matches)
-        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(obs.y), alpha=alpha, q=q, confidence=conf,
-                                matches=matches, clean=clean)
+        return RestorationState(x=x0, z=zeros2, w=zeros2, e=torch.zeros_like(obs.y),
+                                alpha=self._alpha(x0, matches, zeros2), q=q, confidence=conf, matches=matches,
+                                clean=clean)
 
     def extra_repr(self) -> str:
         return f"fill={self.settings.fill!r}, sided_fill={self.sided_fill is not None}"
@@ -162,11 +147,11 @@ class DenoiseInit(_Initial):
         self._tested = _tested if singular is not None and settings.singular else _measured
         self._prior = _guided_estimate if guided_prior else _no_prior
 
-    def forward(self, obs: Observation, reuse: ColdStart = COLD) -> InitialEstimate:
+    def forward(self, obs: Observation) -> InitialEstimate:
         guided, confident = self.guided(obs)  # holes at depth gaps filled from one side
         supported = self._supported(self, obs)
         x0, q, conf, clean = self._tested(self, replace(obs, supported=supported), guided)
-        return InitialEstimate(self.start(x0, obs, q, conf, clean, reuse), confident, prior=self._prior(guided),
+        return InitialEstimate(self.start(x0, obs, q, conf, clean), confident, prior=self._prior(guided),
                                supported=supported)
 
 
@@ -179,12 +164,12 @@ class UpsampleInit(_Initial):
         super().__init__(settings, sided_fill, matches=nonlocal_, nonlocal_=nonlocal_)
         self.upsampling = upsampling
 
-    def forward(self, obs: Observation, reuse: ColdStart = COLD) -> InitialEstimate:
+    def forward(self, obs: Observation) -> InitialEstimate:
         guided, confident = self.guided(obs)
         x0_lr = self.observation_grid(obs, guided)
         ref = upsampling_reference(x0_lr, obs.observed, obs.rgb, obs.K.scale, self.upsampling)
         x0 = bounded_upsample(ref, obs.K, self.upsampling, noise=obs.noise)
-        state = self.start(x0, obs, obs.observed, obs.observed, None, reuse)
+        state = self.start(x0, obs, obs.observed, obs.observed, None)
         return InitialEstimate(state, confident, reference=ref)
 
     def extra_repr(self) -> str:
@@ -208,12 +193,12 @@ def _no_matches(x0: torch.Tensor, obs: Observation) -> None:
     return None
 
 
-def _alpha(x0: torch.Tensor, matches) -> torch.Tensor:
-    return nonlocal_terms(x0, grad(x0), matches)[0]
+def _alpha(x0: torch.Tensor, matches, zeros2: torch.Tensor) -> torch.Tensor:
+    return nonlocal_gradient(grad(x0), matches)  # α alone: nonlocal_terms' α without its value statistics
 
 
-def _no_alpha(x0: torch.Tensor, matches) -> torch.Tensor:
-    return x0.new_zeros(x0.shape[0], 2, *x0.shape[-2:])
+def _no_alpha(x0: torch.Tensor, matches, zeros2: torch.Tensor) -> torch.Tensor:
+    return zeros2
 
 
 def _support(init: DenoiseInit, obs: Observation) -> Optional[torch.Tensor]:

@@ -18,7 +18,7 @@ import torch
 
 from ._checks import check_4d, check_same_shape
 from .block_matching import BlockMatches, gather_neighbors
-from .native import cpu_kernel, host_path, on_device
+from .native import cpu_kernel, host_kernel, host_path, on_device
 
 __all__ = ["nonlocal_gradient", "nonlocal_terms", "nonlocal_value_prior"]
 
@@ -29,7 +29,8 @@ def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tens
     """α_i = Σ_m ω[m, i] · grad_x[index[m, i]]: the weighted mean of the gradients at matched centres.
 
     Differentiable with respect to ``grad_x`` (a gather and a weighted sum) and to ``matches.weight``;
-    the indices carry no gradient.
+    the indices carry no gradient. On the CPU without gradient, for ``C = 2``, by a numba kernel with
+    :func:`nonlocal_terms`' arithmetic (the same α; :mod:`~torch_depth_sr.nonlocal_kernel`).
 
     Args:
         grad_x: ``(B, C, H, W)`` gradient field (``C = 2`` for ``D x``; any ``C`` works).
@@ -49,6 +50,10 @@ def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tens
     """
     check_4d(grad_x, "grad_x")
     check_same_shape(matches.weight, matches.index, "matches.weight", "matches.index", _SAME_MATCHES)
+    if grad_x.shape[1] == 2 and matches.index.shape[0] == grad_x.shape[0] and matches.index.shape[2:] == grad_x.shape[2:]:
+        kernel = host_kernel("nonlocal_kernel", "nonlocal_gradient_cpu", grad_x, matches.weight)
+        if kernel is not None:
+            return kernel(grad_x, matches.index, matches.weight)
     neigh = gather_neighbors(grad_x, matches.index)  # (B, C, k, H, W)
     w = matches.weight.to(grad_x.dtype).unsqueeze(1)  # (B, 1, k, H, W)
     return (w * neigh).sum(dim=2)  # (B, C, H, W)

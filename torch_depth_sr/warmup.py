@@ -15,7 +15,7 @@ from .edge_snap import refit_to_measurements, snap_to_sides
 from .fill import fill_holes_sided
 from .guided_filters import domain_transform_filter
 from .native import _NOTICE, _dispatchers, _ours, cpu_kernel, kernel_cache_dir
-from .nonlocal_prior import nonlocal_terms
+from .nonlocal_prior import nonlocal_gradient, nonlocal_terms
 from .operators import grad
 from .singular import detect_singular, supported_or_line
 from .stream.change import _nearest_distance as nearest_distance
@@ -48,6 +48,7 @@ def _warmup_steps(dtype: torch.dtype):
     def terms():
         with torch.no_grad():
             nonlocal_terms(x, grad(x), held["m"], value_weight=1.0, plane_ridge=0.1, range_sigma=1.0)
+            nonlocal_gradient(grad(x), held["m"])  # x⁰'s α⁰ alone
 
     def singular():  # the test's rounds and its support rule (neighbours and lines)
         detect_singular(x, x, trust, held["m"], sigma_floor=0.1, rounds=2, backend="numba")

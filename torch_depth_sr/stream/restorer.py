@@ -47,7 +47,6 @@ from .change import change_test, local_spread, remembered_spread
 from .crop_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
 from .runs import grow_runs, join_runs
-from .warm_start import WarmStart
 
 __all__ = ["DEFAULT_STREAM_MODEL", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
            "default_stream_model", "with_stream"]
@@ -83,7 +82,6 @@ class StreamState:
     rgb: Optional[torch.Tensor]  # (B,3,H,W) the colour image
     matches: Optional[tuple[torch.Tensor, torch.Tensor]]  # the last layer's (dist, index), or None
     departed: torch.Tensor  # (B,1,H,W) a measurement held out as the first departure from its run's mean (0: none)
-    alpha: Optional[torch.Tensor] = None  # (B,2,H,W) α⁰ in depth units (warm_start; None: not kept)
     match_weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None  # the matches' weights, the temperature
 
 
@@ -160,7 +158,6 @@ class _Frame:
         self.static: Optional[torch.Tensor] = None
         self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
         self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
-        self.reuse: Optional[WarmStart] = None  # α⁰, kept from the previous frame where not fresh
         self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
 
     def observe(self, obs: Observation) -> Observation:
@@ -198,11 +195,7 @@ class _Frame:
         return obs
 
     def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
-        st, fresh = self.state, self.fresh if self.settings.reuse_initial else None
-        previous = None if st is None or st.alpha is None else st.alpha.to(obs.y) / obs.scale.to(obs.y).view(-1, 1, 1, 1)
-        self.reuse = WarmStart(previous, fresh, search_radius(obs.block_matcher.settings, obs.task))
-        initial = init(obs, self.reuse)
-        self.stats["initial_computed"] = self.reuse.computed
+        initial = init(obs)
         prior = obs.temporal
         hole = obs.observed <= 0
         if prior is None:
@@ -228,11 +221,6 @@ class _Frame:
             # (max_frames measurements): on crops around those pixels (crop_layers)
             state = run_later_layers(layers[len(first):], state, obs, self.fresh)
         return state
-
-    def _alpha_kept(self, obs: Observation, dtype: torch.dtype) -> Optional[torch.Tensor]:
-        """This frame's α⁰ in depth units (the next frame's scale differs), or None."""
-        kept = None if self.reuse is None else self.reuse.kept
-        return None if kept is None else kept.to(dtype) * obs.scale.to(dtype).view(-1, 1, 1, 1)
 
     def _from_past(self, obs: Observation) -> torch.Tensor:
         """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""
@@ -278,7 +266,7 @@ class _Frame:
             self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
                                     confidence=confidence, spread=spread, rgb=rgb, matches=matches,
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed,
-                                    alpha=self._alpha_kept(obs, x.dtype), match_weights=weights)
+                                    match_weights=weights)
 
 
 DEFAULT_STREAM_MODEL = "denoise-fast"
