@@ -49,7 +49,7 @@ def test_shape_error():
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_kernel_gives_nonlocal_terms_alpha_bit_for_bit_and_the_torch_path_to_rounding(monkeypatch, dtype):
-    """α alone (x⁰'s α⁰): the numba kernel sums as nonlocal_terms' kernel does; the torch path sums in the dtype."""
+    """α alone (x⁰'s α⁰): the numba kernel sums as nonlocal_terms' kernel does; the torch path in the dtype."""
     from torch_depth_sr.nonlocal_prior import nonlocal_terms
     from torch_depth_sr.operators import grad
 

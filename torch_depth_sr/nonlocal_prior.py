@@ -50,7 +50,8 @@ def nonlocal_gradient(grad_x: torch.Tensor, matches: BlockMatches) -> torch.Tens
     """
     check_4d(grad_x, "grad_x")
     check_same_shape(matches.weight, matches.index, "matches.weight", "matches.index", _SAME_MATCHES)
-    if grad_x.shape[1] == 2 and matches.index.shape[0] == grad_x.shape[0] and matches.index.shape[2:] == grad_x.shape[2:]:
+    same_grid = matches.index.shape[0] == grad_x.shape[0] and matches.index.shape[2:] == grad_x.shape[2:]
+    if grad_x.shape[1] == 2 and same_grid:
         kernel = host_kernel("nonlocal_kernel", "nonlocal_gradient_cpu", grad_x, matches.weight)
         if kernel is not None:
             return kernel(grad_x, matches.index, matches.weight)

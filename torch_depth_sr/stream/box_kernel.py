@@ -8,6 +8,9 @@ same running sums in the same order (one float64 sum from the first padded eleme
 differences and division, so the means are the same bit for bit (tested): a row pass writes each row's window sums,
 a column pass, by bands of columns, the window means. Rows, and bands, split across threads
 (:func:`~torch_depth_sr.native.run_range`) with the same results for any thread count.
+The stream's noise units (:func:`~torch_depth_sr.stream.change.local_spread`,
+:func:`~torch_depth_sr.stream.change.remembered_spread`) use the same passes on planes made on the fly (``|y − x|``
+where measured, and the measured pixels), without the torch path's temporaries, and the same values.
 Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
@@ -88,11 +91,13 @@ def box_mean_cpu(v: torch.Tensor, window: int) -> torch.Tensor:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _spread_rows(t0, t1, y, observed, x, window, consts, out):
-    """Rows ``[t0, t1)`` of the ``B·(C+1)·H`` rows of :func:`_rows`' sums of the planes ``local_spread`` boxes, made
-    on the fly: plane ``b·(C+1) + c`` holds ``|y − x_c|`` where observed (else 0) for ``c < C``, and the measured
-    pixels (1 or 0) for ``c = C``, each in the dtype first, as the torch path's planes."""
-    nc, h, w = x.shape[1], x.shape[2], x.shape[3]
+def _spread_rows(t0, t1, y, observed, x, past, window, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·P·H`` rows of :func:`_rows`' sums of the planes ``local_spread`` boxes, made on
+    the fly (``P`` = the channels of ``x`` and ``past``, and one): plane ``c`` of a sample holds ``|y − x_c|`` where
+    observed (else 0), then ``|y − past_c|``, then the measured pixels (1 or 0), each in the dtype first, as the
+    torch path's planes of their concatenation."""
+    nx, h, w = x.shape[1], x.shape[2], x.shape[3]
+    per = nx + past.shape[1] + 1
     p = window // 2
     n = w + 2 * p + 1
     c = np.empty(n)
@@ -100,17 +105,19 @@ def _spread_rows(t0, t1, y, observed, x, window, consts, out):
     for t in range(t0, t1):
         plane = t // h
         i = t - plane * h
-        b = plane // (nc + 1)
-        ch = plane - b * (nc + 1)
+        b = plane // per
+        ch = plane - b * per
         acc = 0.0
         for k in range(n):
             j = k - p - 1
-            if 0 <= j < w:
-                if observed[b, 0, i, j] > 0:
-                    v = abs(y[b, 0, i, j] - x[b, ch, i, j]) if ch < nc else one
-                    acc += np.float64(v)
+            if 0 <= j < w and observed[b, 0, i, j] > 0:
+                if ch < nx:
+                    v = abs(y[b, 0, i, j] - x[b, ch, i, j])
+                elif ch < per - 1:
+                    v = abs(y[b, 0, i, j] - past[b, ch - nx, i, j])
                 else:
-                    acc += 0.0
+                    v = one
+                acc += np.float64(v)
             else:
                 acc += 0.0
             c[k] = acc
@@ -144,45 +151,14 @@ def local_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, w
     dtype = arrays[0].dtype
     rows = np.empty((b * (nc + 1), h, w), dtype=np.float64)
     consts = np.array([1.0, 0.0, 1e-12], dtype=dtype)  # one, zero, the torch path's clamp of the measured share
-    run_range(_spread_rows, b * (nc + 1) * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
+    none = np.empty((b, 0, h, w), dtype=dtype)
+    run_range(_spread_rows, b * (nc + 1) * h, *arrays, none, window, consts, rows, min_share=_MIN_ROWS)
     means = np.empty_like(rows)
     bands = -(-w // _BAND)
     run_range(_columns, b * (nc + 1) * bands, rows, window, bands, means)
     out = np.empty((b, nc, h, w), dtype=dtype)
     run_range(_spread_ratio, b * nc * h, means, consts, out, min_share=_MIN_ROWS)
     return torch.from_numpy(out)
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _pair_rows(t0, t1, y, observed, x, past, window, consts, out):
-    """:func:`_spread_rows` of the planes ``[x, past]`` (B,1,H,W) each, as ``local_spread`` of their concatenation
-    makes them, without the concatenation."""
-    h, w = x.shape[2], x.shape[3]
-    p = window // 2
-    n = w + 2 * p + 1
-    c = np.empty(n)
-    one = consts[0]
-    for t in range(t0, t1):
-        plane = t // h
-        i = t - plane * h
-        b = plane // 3
-        ch = plane - b * 3
-        acc = 0.0
-        for k in range(n):
-            j = k - p - 1
-            if 0 <= j < w and observed[b, 0, i, j] > 0:
-                if ch == 0:
-                    v = abs(y[b, 0, i, j] - x[b, 0, i, j])
-                elif ch == 1:
-                    v = abs(y[b, 0, i, j] - past[b, 0, i, j])
-                else:
-                    v = one
-                acc += np.float64(v)
-            else:
-                acc += 0.0
-            c[k] = acc
-        for j in range(w):
-            out[plane, i, j] = c[j + window] - c[j]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -208,14 +184,15 @@ def _remember(t0, t1, means, past_spread, static, consts, out):
             out[b, 0, i, j] = spread
 
 
-def remembered_spread_cpu(y, observed, x, past, past_spread, static, window: int, memory: float) -> torch.Tensor:
+def remembered_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, past: torch.Tensor,
+                          past_spread: torch.Tensor, static: torch.Tensor, window: int, memory: float) -> torch.Tensor:
     """``change.remembered_spread`` for (B,1,H,W) CPU tensors of one float dtype (``static`` bool), no gradient."""
     b, _, h, w = x.shape
     arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, x, past)]
     dtype = arrays[0].dtype
     consts = np.array([1.0, 0.0, 1e-12, memory], dtype=dtype)  # one, zero, the measured share's clamp, the memory
     rows = np.empty((b * 3, h, w), dtype=np.float64)
-    run_range(_pair_rows, b * 3 * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
+    run_range(_spread_rows, b * 3 * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
     means = np.empty_like(rows)
     bands = -(-w // _BAND)
     run_range(_columns, b * 3 * bands, rows, window, bands, means)

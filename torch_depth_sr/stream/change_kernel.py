@@ -1,19 +1,21 @@
-"""Three steps of a stream's change test as numba kernels: the distance to the nearest previous value
+"""The steps of a stream's change test as numba kernels: the distance to the nearest previous value
 (:func:`~torch_depth_sr.stream.change.distances`' ``d1``), the depth votes
-(:func:`~torch_depth_sr.stream.change.depth_votes`) and the dilation of a mask
-(:func:`~torch_depth_sr.stream.matching.dilate`).
+(:func:`~torch_depth_sr.stream.change.depth_votes`), the dilation of a mask
+(:func:`~torch_depth_sr.stream.matching.dilate`), the colour change (:func:`~torch_depth_sr.stream.change.colour_changes`)
+and the camera test's shifted differences (:func:`~torch_depth_sr.stream.change.camera_moved`).
 
 In torch each is a chain of whole-frame operations, each with a temporary: ``d1`` is 8 differences, 8 absolute values
 and 8 minima over a padded copy, then a division and a selection; a dilation is a float copy of the mask and a
 running maximum of ``2·radius`` shifted planes per axis. At 1376×1088 the two took about 0.1 s of a 2.6 s stream
 step, the votes' 0/1 planes and their window means about 0.08 s more. Here ``d1`` is one pass. The dilation and the
 votes share one mechanism, the window counts of 0/1 planes (:func:`_window_counts`: a row pass, then bands of
-columns): a dilation is a count above 0, and the votes are formed from the counts of the far and the measured pixels
-with the torch path's roundings (the torch path's float64 window sums of 0/1 values are those integers). The same
+columns): a dilation is a count above 0 (in the box around the set pixels only), and the votes are formed from the
+counts of the far and the measured pixels with the torch path's roundings (the torch path's float64 window sums of 0/1
+values are those integers). The colour change and each pixel's own change are one pass over the channels. The same
 arithmetic as torch throughout (a difference, its absolute value, the smallest, one division in the frame's dtype),
-so the results are the torch path's bit for bit (tested). Rows and bands split across threads
-(:func:`~torch_depth_sr.native.run_range`).
-Compiled by LLVM at first use and cached on disk (``cache=True``).
+so the results are the torch path's bit for bit (tested) — except the camera test's 25 sums, taken in float64 and
+reassociated (vectorised): they agree with torch's float32 means to float32 rounding. Rows and bands split across
+threads (:func:`~torch_depth_sr.native.run_range`). Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
 
@@ -226,8 +228,8 @@ def _shifts(t0, t1, a, b, centre, reach, out):
 
 
 def shift_changes_cpu(a: torch.Tensor, b: torch.Tensor, reach: int) -> torch.Tensor:
-    """(B, (2·reach + 1)²) float64: ``camera_moved``'s mean absolute changes of the centred images ``a``, ``b`` (B,H,W)
-    (H, W > 2·reach) over the core, for each shift of ``b``, row-major from (−reach, −reach). One pass over the
+    """(B, (2·reach + 1)²) float64: ``camera_moved``'s mean absolute changes of the centred images ``a``, ``b``
+    (B,H,W; H, W > 2·reach) over the core, for each shift of ``b``, row-major from (−reach, −reach). One pass over the
     core rows with the sums in float64 (torch's float32 means differ from them in the last bits)."""
     n, h, w = a.shape
     x = np.ascontiguousarray(a.detach().numpy())

@@ -128,7 +128,9 @@ class StreamMatcher:
         dist, index = self.previous_dist.to(x.dtype), self.previous_index
         weights = self.previous_weights[0] if self._weights_hold(dist) else None
         if not bool(self.fresh.any()):
-            return finish(dist.detach(), index, self.temperature) if weights is None else BlockMatches(dist, index, weights)
+            if weights is None:
+                return finish(dist.detach(), index, self.temperature)
+            return BlockMatches(dist, index, weights)
         h, w = x.shape[-2:]
         s = self.settings
         window, k = s.window_and_k()[obs.task]

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from numba import njit
 
+from ..config import StreamConfig
 from ..native import run_range
 
 __all__ = ["grow_runs_cpu", "join_runs_cpu"]
@@ -72,7 +73,9 @@ def _planes(*tensors: torch.Tensor) -> list:
     return [np.ascontiguousarray(t.detach().reshape(t.shape[0], t.shape[-2], t.shape[-1]).numpy()) for t in tensors]
 
 
-def join_runs_cpu(y, observed, static, candidate, noise, evidence, mean, departed, age, offset, scale, s) -> tuple:
+def join_runs_cpu(y: torch.Tensor, observed: torch.Tensor, static: torch.Tensor, candidate: torch.Tensor,
+                  noise: torch.Tensor, evidence: torch.Tensor, mean: torch.Tensor, departed: torch.Tensor,
+                  age: torch.Tensor, offset: torch.Tensor, scale: torch.Tensor, s: StreamConfig) -> tuple:
     """:func:`~torch_depth_sr.stream.runs.join_runs`' maps for (B,1,H,W) CPU tensors of one float dtype (``static``,
     ``candidate`` bool; ``offset``, ``scale`` (B,)), no gradient: the fields of ``JoinedRuns`` in order."""
     b, _, h, w = y.shape
@@ -134,11 +137,13 @@ def _grow(t0, t1, y, observed, trusted, confidence, static, restarted, evidence,
         counts[t, 1] = still
 
 
-def grow_runs_cpu(y, observed, trusted, confidence, static, restarted, evidence, age, past_confidence, past_mean,
-                  offset, scale, s) -> tuple:
+def grow_runs_cpu(y: torch.Tensor, observed: torch.Tensor, trusted: torch.Tensor, confidence: torch.Tensor,
+                  static: torch.Tensor, restarted: torch.Tensor, evidence: torch.Tensor, age: torch.Tensor,
+                  past_confidence: torch.Tensor, past_mean: torch.Tensor, offset: torch.Tensor, scale: torch.Tensor,
+                  s: StreamConfig) -> tuple:
     """:func:`~torch_depth_sr.stream.runs.grow_runs` for (B,1,H,W) CPU tensors of one float dtype (``trusted``,
-    ``static``, ``restarted`` bool; ``offset``, ``scale`` (B,)), no gradient: ``(age, evidence, confidence, mean, filled from
-    the past, static)``, the last two as shares of the pixels."""
+    ``static``, ``restarted`` bool; ``offset``, ``scale`` (B,)), no gradient: ``(age, evidence, confidence, mean,
+    filled from the past, static)``, the last two as shares of the pixels."""
     b, _, h, w = y.shape
     arrays = _planes(y, observed, trusted, confidence, static, restarted, evidence, age, past_confidence, past_mean)
     dtype = arrays[0].dtype
