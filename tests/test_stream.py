@@ -462,6 +462,55 @@ def test_kept_match_weights_are_the_softmax_again_and_skipped_when_the_temperatu
     assert torch.equal(cached.weight[outside], fresh.weight[outside])
 
 
+def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_again(monkeypatch):
+    """keep_scale: while most of the previous frame was static a frame is normalised with the previous frame's
+    offset, scale range and grid step, its noise level a running mean of quarter-row estimates; a frame after a
+    mostly changed one (a moved camera) estimates them again; off: every frame its own."""
+    import torch_depth_sr.model as model_module
+    import torch_depth_sr.observation as observation
+
+    seen = []
+
+    def spy(*args, policy=None, **kw):
+        obs = observation.observe(*args, policy=policy, **kw)
+        seen.append((policy is not None, obs.policy))
+        return obs
+
+    monkeypatch.setattr(model_module, "observe", spy)
+    gt, rgb = _scene()
+    m = small_model()
+    s = StreamRestorer(m)
+    for t in range(4):
+        s.step(_noisy(gt, t), rgb)
+    assert [k for k, _ in seen] == [False, True, True, True]  # the first frame estimates, the others keep
+    first, last = seen[0][1], seen[-1][1]
+    assert torch.equal(first.offset, last.offset) and torch.equal(first.percentiles, last.percentiles)
+    assert not torch.equal(first.sigma, last.sigma)  # the noise level is still averaged over frames
+    torch.testing.assert_close(last.sigma, first.sigma, rtol=0.2, atol=0)
+    seen.clear()
+    s.step(np.roll(_noisy(gt, 5), 3, axis=1), np.roll(rgb, 3, axis=2))  # the camera moved: every pixel changed
+    s.step(np.roll(_noisy(gt, 6), 3, axis=1), np.roll(rgb, 3, axis=2))
+    assert [k for k, _ in seen] == [True, False]  # the frame after the move estimates again
+    seen.clear()
+    off = StreamRestorer(m, {"keep_scale": False})
+    for t in range(3):
+        off.step(_noisy(gt, t), rgb)
+    assert [k for k, _ in seen] == [False, False, False]
+
+
+def test_sampled_noise_sigma_estimates_the_noise_from_a_quarter_of_the_rows():
+    from torch_depth_sr.noise import estimate_noise_sigma, sampled_noise_sigma
+
+    g = torch.Generator().manual_seed(0)
+    y = 500 + 0.5 * torch.arange(240.0).view(1, 1, 240, 1) + 3 * torch.randn(2, 1, 240, 320, generator=g)
+    observed = (torch.rand(y.shape, generator=g) > 0.1).float()
+    full = estimate_noise_sigma(y, observed)
+    for phase in (1, 2, 3):
+        torch.testing.assert_close(sampled_noise_sigma(y, observed, phase), full, rtol=0.05, atol=0)
+    assert torch.equal(sampled_noise_sigma(y[..., :1, :], observed[..., :1, :], 1),
+                       estimate_noise_sigma(y[..., :1, :], observed[..., :1, :]))  # no row to sample: all of them
+
+
 def test_recordings_factory_streams_and_replays(tmp_path):
     import cv2
 

@@ -29,8 +29,8 @@ from .native import host_path
 from .selection import distinct, kth_smallest, lower_median
 from .window_max import max_filter
 
-__all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "quantisation_step", "sample_percentiles",
-           "white_noise_sigma"]
+__all__ = ["depth_scale", "estimate_noise_sigma", "implausible", "policy_scale", "quantisation_step",
+           "sample_percentiles", "sampled_noise_sigma", "white_noise_sigma"]
 
 _MAD_TO_STD = 1.4826
 # Patch PCA over second differences on clean maps resampled from integer depth (the eleven Middlebury 2006 images of
@@ -76,6 +76,31 @@ def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, method: st
                                torch.cat([mh.flatten(1), mv.flatten(1)], 1))
         return torch.where(n >= 16, _MAD_TO_STD * _lower_median(vals, n) / 6**0.5, out)
     for i in range(b):
+        vals = torch.cat([dh[i][mh[i]], dv[i][mv[i]]]).abs()
+        if vals.numel() >= 16:
+            out[i] = _MAD_TO_STD * lower_median(vals) / 6**0.5
+    return out
+
+
+def sampled_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, phase: int, every: int = 4) -> torch.Tensor:
+    """:func:`estimate_noise_sigma` (second differences) from the rows ``phase, phase + every, …`` only: the
+    horizontal triplets of those rows and the vertical triplets centred on them (``1 <= phase < every``). A
+    quarter of the work for ``every = 4``, and as many times the variance; a stream averages it over frames whose
+    phases cycle through the rows (:class:`~torch_depth_sr.stream.StreamRestorer`)."""
+    h = depth.shape[-2]
+    n = len(range(phase, h - 1, every))
+    if n == 0:
+        return estimate_noise_sigma(depth, observed)
+    d, m = depth.detach(), observed > 0
+    rows = [slice(phase + k, phase + k + every * (n - 1) + 1, every) for k in (-1, 0, 1)]
+    up, mid, down = (d[..., r, :] for r in rows)
+    mu, mm, md = (m[..., r, :] for r in rows)
+    dh = mid[..., :, :-2] - 2 * mid[..., :, 1:-1] + mid[..., :, 2:]
+    mh = mm[..., :, :-2] & mm[..., :, 1:-1] & mm[..., :, 2:]
+    dv = up - 2 * mid + down
+    mv = mu & mm & md
+    out = depth.new_zeros(depth.shape[0])
+    for i in range(depth.shape[0]):
         vals = torch.cat([dh[i][mh[i]], dv[i][mv[i]]]).abs()
         if vals.numel() >= 16:
             out[i] = _MAD_TO_STD * lower_median(vals) / 6**0.5
@@ -346,7 +371,12 @@ def depth_scale(depth: torch.Tensor, observed: torch.Tensor, noise_sigma: float 
             sigma = torch.maximum(sigma, step.to(sigma) / 12**0.5)
     else:
         sigma = torch.as_tensor(noise_sigma, dtype=depth.dtype, device=depth.device).expand(b).clone()
+    return offset, policy_scale(sigma, spread, offset, relative_floor), sigma
+
+
+def policy_scale(sigma: torch.Tensor, spread: torch.Tensor, offset: torch.Tensor,
+                 relative_floor: float = 1e-3) -> torch.Tensor:
+    """:func:`depth_scale`'s scale from its parts (B,): ``max(sigma, relative_floor · spread, 1e-6 · |offset|)``."""
     scale = torch.maximum(sigma, relative_floor * spread)
     scale = torch.maximum(scale, 1e-6 * offset.abs())
-    scale = scale.clamp_min(torch.finfo(depth.dtype).tiny)
-    return offset, scale, sigma
+    return scale.clamp_min(torch.finfo(sigma.dtype).tiny)

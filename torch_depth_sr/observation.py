@@ -7,20 +7,31 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Optional
+from typing import Any, NamedTuple, Optional
 
 import torch
 
 from ._checks import check_noise_sigma
-from .noise import depth_scale, implausible, quantisation_step, sample_percentiles, white_noise_sigma
+from .noise import depth_scale, implausible, policy_scale, quantisation_step, sample_percentiles, white_noise_sigma
 from .native import host_path
 from .operators import Degradation
 from .state import RunLog
 
-__all__ = ["Observation", "TASKS", "observe"]
+__all__ = ["Observation", "ScalePolicy", "TASKS", "observe"]
 
 TASKS = ("denoise", "upsample")
 """``"denoise"``: K is the identity (restoration on the observation grid); ``"upsample"``: K downsamples."""
+
+
+class ScalePolicy(NamedTuple):
+    """An observation's scale policy, each (B,) but ``percentiles`` (B,2): what :func:`observe` estimates of a frame,
+    and what a stream hands to its next frame while the scene stays (``StreamConfig.keep_scale``)."""
+
+    offset: torch.Tensor  # the lower median of the measured depth
+    scale: torch.Tensor  # the unit of the normalised depth (noise_scale.policy_scale)
+    sigma: torch.Tensor  # the noise σ in depth units
+    step: torch.Tensor  # the quantisation step (0 = none)
+    percentiles: torch.Tensor  # p1 and p99 of the measured depth (the implausible-value test)
 
 
 @dataclass(frozen=True)
@@ -46,6 +57,12 @@ class Observation:
     supported: Optional[torch.Tensor] = None  # (B,1,h,w) bool: pixels the singular test always trusts
     guidance: Any = None  # the guidance network with this forward's colour features, or NoGuidance
     temporal: Any = None  # a stream's previous frame (stream.TemporalPrior: target, weight), None = none
+    percentiles: Optional[torch.Tensor] = None  # (B,2) p1 and p99 of the measured depth (the scale policy's)
+
+    @property
+    def policy(self) -> ScalePolicy:
+        """The scale policy this observation was normalised with."""
+        return ScalePolicy(self.offset, self.scale, self.sigma, self.step, self.percentiles)
 
     @property
     def grid_step(self) -> torch.Tensor:
@@ -72,24 +89,36 @@ class Observation:
 
 
 def observe(y: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tensor], K: Degradation,
-            noise_sigma: Any, integer_input: bool, block_matcher: Any, timed: bool) -> Observation:
+            noise_sigma: Any, integer_input: bool, block_matcher: Any, timed: bool,
+            policy: Optional[ScalePolicy] = None) -> Observation:
     """The scale policy: quantisation step, noise σ̂, offset and scale of ``y (B,1,h,w)``, implausible values
-    (glitches) taken as missing and the scale estimated again without them; the task from ``K``."""
+    (glitches) taken as missing and the scale estimated again without them; the task from ``K``. With ``policy``
+    (a stream's previous frame, :class:`ScalePolicy`) nothing is estimated: the frame is normalised with it, its
+    glitches found against its percentiles (a ``noise_sigma`` given still sets σ and the scale)."""
     b = y.shape[0]
-    step = quantisation_step(y, observed, integer_input=integer_input)
-    percentiles = sample_percentiles(y, observed)
-    offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step,
-                                       percentiles=percentiles)
-    glitches = implausible(y, observed, scale, percentiles=percentiles)
-    # off the CPU the scale is estimated again whatever the glitches (without any it comes out the same): asking
-    # would make the host wait for the device
-    if not host_path(y.device) or bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
+    if policy is not None:
+        offset, _, sigma, step, percentiles = policy
+        if noise_sigma is not None:
+            given = check_noise_sigma(noise_sigma, b)
+            sigma = torch.as_tensor(given, dtype=y.dtype, device=y.device).expand(b).clone()
+        scale = policy_scale(sigma, percentiles[:, 1] - percentiles[:, 0], offset)
+        glitches = implausible(y, observed, scale, percentiles=percentiles)
         observed = torch.where(glitches, torch.zeros_like(observed), observed)
+    else:
         step = quantisation_step(y, observed, integer_input=integer_input)
-        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
+        percentiles = sample_percentiles(y, observed)
+        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step,
+                                           percentiles=percentiles)
+        glitches = implausible(y, observed, scale, percentiles=percentiles)
+        # off the CPU the scale is estimated again whatever the glitches (without any it comes out the same): asking
+        # would make the host wait for the device
+        if not host_path(y.device) or bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
+            observed = torch.where(glitches, torch.zeros_like(observed), observed)
+            step = quantisation_step(y, observed, integer_input=integer_input)
+            offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
     o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
     yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
     return Observation(y=yn, observed=observed, rgb=guide, K=K, task="denoise" if K.is_identity else "upsample",
                        raw=y, offset=offset, scale=scale, sigma=sigma, step=step, glitches=glitches,
                        sigma_given=noise_sigma is not None, block_matcher=block_matcher,
-                       log=RunLog(timings={} if timed else None))
+                       log=RunLog(timings={} if timed else None), percentiles=percentiles)

@@ -409,7 +409,9 @@ class StreamConfig(Group):
     from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
     parts keep the previous frame's matches. A frame with a previous frame runs the model's first ``layers`` layers on
     the whole frame and the others on crops around the pixels that changed or whose static run is younger than
-    ``max_frames`` (:mod:`~torch_depth_sr.stream.crop_layers`; None: every layer everywhere)."""
+    ``max_frames`` (:mod:`~torch_depth_sr.stream.crop_layers`; None: every layer everywhere). With ``keep_scale`` a
+    frame is normalised with the previous frame's scale policy (offset, scale, noise σ̂, grid step) while at least half
+    of the previous frame was static, instead of estimating them again."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by
@@ -427,6 +429,7 @@ class StreamConfig(Group):
     window: int = 3
     dilate: int = 2
     reuse_matches: bool = True
+    keep_scale: bool = True
     layers: Optional[int] = None
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
@@ -434,4 +437,4 @@ class StreamConfig(Group):
                                "depth_test": positive, "camera_test": optional(real(0.0, 1.0)),
                                "outlier_test": optional(positive), "color_test": positive,
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
-                               "layers": optional(integer(1))}
+                               "keep_scale": boolean, "layers": optional(integer(1))}

@@ -40,7 +40,8 @@ from ..config import StreamConfig
 from ..errors import ShapeError
 from ..initial import InitialEstimate
 from ..model import DepthRestorer, NoiseSigma, _check_fill, _check_model_input, _is_integer_dtype
-from ..observation import Observation
+from ..noise import sampled_noise_sigma
+from ..observation import Observation, ScalePolicy
 from ..state import RestorationState
 from ..terms import TemporalPriorTerm
 from .change import change_test, local_spread, remembered_spread
@@ -83,6 +84,8 @@ class StreamState:
     matches: Optional[tuple[torch.Tensor, torch.Tensor]]  # the last layer's (dist, index), or None
     departed: torch.Tensor  # (B,1,H,W) a measurement held out as the first departure from its run's mean (0: none)
     match_weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None  # the matches' weights, the temperature
+    policy: Optional[ScalePolicy] = None  # the observation's scale policy (offset, scale, σ, grid step, percentiles)
+    static_share: float = 1.0  # the share of static pixels (1 on a first frame: it found nothing changed)
 
 
 class StreamResult(NamedTuple):
@@ -150,8 +153,8 @@ class _Frame:
     """The stream hooks of :meth:`DepthRestorer._run` for one frame: the previous frame into the observation and
     the initial stage, this frame kept for the next (:attr:`kept`)."""
 
-    def __init__(self, settings: StreamConfig, state: Optional[StreamState]):
-        self.settings, self.state = settings, state
+    def __init__(self, settings: StreamConfig, state: Optional[StreamState], index: int = 0):
+        self.settings, self.state, self.index = settings, state, index
         self.kept: Optional[StreamState] = None
         self.valid: Optional[torch.Tensor] = None
         self.stats: dict = {}
@@ -159,6 +162,20 @@ class _Frame:
         self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
         self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
         self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
+
+    def scale_policy(self, y: torch.Tensor, observed: torch.Tensor) -> Optional[ScalePolicy]:
+        """The previous frame's scale policy while at least half of that frame was static (``keep_scale``): a
+        static scene's offset, scale and noise level stay what they were, and estimating them again cost about a tenth
+        of a step (docs/stream.md); else None, estimated again."""
+        st = self.state
+        if (st is None or not self.settings.keep_scale or st.policy is None or st.static_share < 0.5
+                or st.policy.offset.shape[0] != y.shape[0]):
+            return None
+        policy = ScalePolicy(*(t.to(device=y.device, dtype=y.dtype) for t in st.policy))
+        # the noise level: a running mean of estimates from a quarter of the rows each frame (the rows cycle)
+        sampled = sampled_noise_sigma(y, observed, 1 + self.index % 4)
+        sigma = torch.where(sampled > 0, 0.75 * policy.sigma + 0.25 * sampled, policy.sigma)
+        return policy._replace(sigma=torch.maximum(sigma, policy.step / 12**0.5))
 
     def observe(self, obs: Observation) -> Observation:
         s, st = self.settings, self.state
@@ -266,7 +283,8 @@ class _Frame:
             self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
                                     confidence=confidence, spread=spread, rgb=rgb, matches=matches,
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed,
-                                    match_weights=weights)
+                                    match_weights=weights, policy=ScalePolicy(*(t.detach() for t in obs.policy)),
+                                    static_share=self.stats.get("static", 1.0))
 
 
 DEFAULT_STREAM_MODEL = "denoise-fast"
@@ -336,10 +354,10 @@ class StreamRestorer(nn.Module):
         st = self.state
         if st is not None:
             def move(t):
-                if t is None:
-                    return None
+                if t is None or isinstance(t, (float, int)):
+                    return t
                 if isinstance(t, tuple):
-                    return tuple(move(v) for v in t)
+                    return type(t)(*(move(v) for v in t)) if hasattr(t, "_fields") else tuple(move(v) for v in t)
                 return t.to(fn(torch.empty(0, dtype=t.dtype, device=t.device)).device)
             self.state = StreamState(**{f.name: move(getattr(st, f.name)) for f in fields(st)})
         return out
@@ -380,7 +398,7 @@ class StreamRestorer(nn.Module):
         return out.depth.to(device=depth.device, dtype=depth.dtype)
 
     def _step(self, y, observed, rgb, noise_sigma, scale_factor, fill, timed, integer_input):
-        frame = _Frame(self.settings, self.state)
+        frame = _Frame(self.settings, self.state, self.frames)
         sigma = self.noise_sigma if noise_sigma is None else noise_sigma
         out = self.model._run(y, observed, rgb, sigma, scale_factor, fill, timed=timed, integer_input=integer_input,
                               stream=frame)
