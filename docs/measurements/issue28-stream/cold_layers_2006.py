@@ -16,10 +16,10 @@ from torch import nn
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "issue27-tiers"))
 from fit import accuracy  # noqa: E402
 
-from torch_depth_sr import DepthRestorer  # noqa: E402
+from torch_depth_sr.stream import default_stream_model
 
 torch.set_num_threads(1)
-full = DepthRestorer.from_preset("fast")
+full = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
 first = copy.copy(full)
 first._modules = dict(full._modules)
 first.layers = nn.ModuleList([full.layers[0]])

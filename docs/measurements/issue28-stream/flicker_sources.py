@@ -13,14 +13,14 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from torch_depth_sr import DepthRestorer, restore_depth
+from torch_depth_sr import restore_depth
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence
 from torch_depth_sr.evaluation.stream import regions
-from torch_depth_sr.stream import StreamRestorer
+from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
 
 def main() -> None:
-    model = DepthRestorer.from_preset("fast")
+    model = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
     for spec in TUNING_SEQUENCES:
         seq = make_sequence(spec, frames=30, height=120, width=160)
         reg = regions(seq)

@@ -16,15 +16,14 @@ import statistics
 import torch
 from middlebury_streams import MOVER_FROM, arguments, degraded_frames, scenes
 
-from torch_depth_sr import DepthRestorer
 from torch_depth_sr.evaluation.bench import _metrics
-from torch_depth_sr.stream import StreamRestorer
+from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
 
 def main() -> None:
     a = arguments(__doc__, frames=16).parse_args()
     torch.set_num_threads(a.threads)
-    model = DepthRestorer.from_preset("fast")
+    model = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
     for case, mover, start in (("static", False, a.frames // 2), ("mover", True, MOVER_FROM)):
         for track in ("paper", "sensor"):
             ratios: dict = {"every layer": [], "layers 1": []}

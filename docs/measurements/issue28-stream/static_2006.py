@@ -15,9 +15,8 @@ import statistics
 import torch
 from middlebury_streams import arguments, degraded_frames, scenes
 
-from torch_depth_sr import DepthRestorer
 from torch_depth_sr.evaluation.bench import _metrics
-from torch_depth_sr.stream import StreamRestorer
+from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
 
 def main() -> None:
@@ -25,7 +24,7 @@ def main() -> None:
     p.add_argument("--tracks", nargs="+", default=["paper", "sensor"])
     a = p.parse_args()
     torch.set_num_threads(a.threads)
-    model = DepthRestorer.from_preset("fast")
+    model = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
     for track in a.tracks:
         records = scenes(track, a.scenes)
         scores: dict = {"frame": [], "stream, every layer": [], "stream, layers 1": []}

@@ -1,6 +1,6 @@
 """Issue 28: a stream step of a tier against a cold frame of the same tier, the two called in turn in one process.
 
-    python docs/measurements/issue28-stream/step_vs_cold.py [--tier fast] [--layers 1|all] [--threads 2]
+    python docs/measurements/issue28-stream/step_vs_cold.py [--tier denoise-fast] [--layers 1|all] [--threads 2]
         [--sizes 370x463 480x640 1088x1376] [--rounds 5]
 
 The speed track's inputs (``evaluation.speed.make_inputs``: a static synthetic scene, σ = 5, the same holes every
@@ -18,14 +18,14 @@ import time
 
 import torch
 
-from torch_depth_sr import DepthRestorer
+from torch_depth_sr.model import named_model
 from torch_depth_sr.evaluation.speed import make_inputs
 from torch_depth_sr.stream import StreamRestorer
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--tier", default="fast")
+    p.add_argument("--tier", default="denoise-fast", help="a preset or shipped model (default: the stream's model)")
     p.add_argument("--layers", default=None, help="1, 2, ... or 'all' (default: the tier's stream setting)")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--sizes", nargs="+", default=["370x463", "480x640", "1088x1376"])
@@ -37,7 +37,7 @@ def main() -> None:
     for size in a.sizes:
         h, w = map(int, size.split("x"))
         y, rgb, gt = make_inputs(h, w, 1)
-        model = DepthRestorer.from_preset(a.tier)
+        model = named_model(a.tier)
         settings = None if a.layers is None else {"layers": None if a.layers == "all" else int(a.layers)}
         stream = StreamRestorer(model, settings)
         g = torch.Generator().manual_seed(1)

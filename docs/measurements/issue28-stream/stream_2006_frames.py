@@ -12,15 +12,14 @@ from __future__ import annotations
 import torch
 from middlebury_streams import arguments, degraded_frames, scenes
 
-from torch_depth_sr import DepthRestorer
 from torch_depth_sr.evaluation.bench import _metrics
-from torch_depth_sr.stream import StreamRestorer
+from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
 
 def main() -> None:
     a = arguments(__doc__, frames=10).parse_args()
     torch.set_num_threads(a.threads)
-    model = DepthRestorer.from_preset("fast")
+    model = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
     for track in ("paper", "sensor"):
         for rec in scenes(track, a.scenes):
             frames = degraded_frames(rec.load(), track, a.frames)

@@ -9,7 +9,8 @@ tuning sequences (TUNING_SEQUENCES), as ratios to frame-by-frame restoration. A 
 import numpy as np
 import torch
 
-from torch_depth_sr import DepthRestorer, StreamRestorer, restore_depth
+from torch_depth_sr import StreamRestorer, restore_depth
+from torch_depth_sr.stream import default_stream_model
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, TUNING_SEQUENCES, make_sequence
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
 
@@ -38,7 +39,7 @@ def outputs(model, seq, settings=None) -> np.ndarray:
 
 def main() -> None:
     torch.set_num_threads(1)
-    model = DepthRestorer.from_preset("fast")
+    model = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
     for title, specs in (("evaluated", STREAM_SEQUENCES), ("tuning", TUNING_SEQUENCES)):
         seqs = [make_sequence(s, frames=30, height=120, width=160) for s in specs]
         regs = [regions(s) for s in seqs]

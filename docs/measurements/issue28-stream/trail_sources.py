@@ -10,13 +10,14 @@ import sys
 import numpy as np
 import torch
 
-from torch_depth_sr import DepthRestorer, StreamRestorer, restore_depth
+from torch_depth_sr import StreamRestorer, restore_depth
+from torch_depth_sr.stream import default_stream_model
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.evaluation.stream import _dilate, regions
 
 torch.set_num_threads(1)
 names = sys.argv[1:] or ["static-busy", "static-2movers"]
-model = DepthRestorer.from_preset("fast")
+model = default_stream_model()  # the stream's model, denoise-fast (the fast tier until the 14th stop)
 for spec in STREAM_SEQUENCES:
     if spec.name not in names:
         continue

@@ -2,7 +2,7 @@
 sequences only (``datasets.sequences.TUNING_SEQUENCES``: other seeds of the same recipes; the evaluated
 ``STREAM_SEQUENCES`` and the real recordings are never loaded here).
 
-    OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/tune_stream.py [--model fast]
+    OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/tune_stream.py [--model denoise-fast]
 
 For every setting of the grid (change-test dilation, the run-mean cap ``max_frames``, the temporal prior's
 ``weight``): the stream's RMSE, flicker and trail on each tuning sequence divided by frame-by-frame restoration's.
@@ -23,7 +23,7 @@ import itertools
 import numpy as np
 import torch
 
-from torch_depth_sr import DepthRestorer
+from torch_depth_sr.model import named_model
 from torch_depth_sr.config import StreamConfig
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
@@ -44,11 +44,11 @@ def run(step, seq) -> np.ndarray:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--model", default="fast")
+    p.add_argument("--model", default="denoise-fast", help="a preset or shipped model (default: the stream's)")
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--layers-only", action="store_true")
     a = p.parse_args()
-    model = DepthRestorer.from_preset(a.model)
+    model = named_model(a.model)
     seqs = [make_sequence(s, frames=a.frames, height=120, width=160) for s in TUNING_SEQUENCES]
     regs = [regions(s) for s in seqs]
     frame = [synthetic_metrics(run(lambda d, rgb: restore_depth(d, rgb, model=model), s), s, r)
