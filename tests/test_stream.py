@@ -498,7 +498,7 @@ def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_a
     assert [k for k, _ in seen] == [False, False, False]
 
 
-def test_sampled_noise_sigma_estimates_the_noise_from_a_quarter_of_the_rows():
+def test_sampled_noise_sigma_estimates_the_noise_from_a_quarter_of_the_rows(monkeypatch):
     from torch_depth_sr.noise import estimate_noise_sigma, sampled_noise_sigma
 
     g = torch.Generator().manual_seed(0)
@@ -509,6 +509,9 @@ def test_sampled_noise_sigma_estimates_the_noise_from_a_quarter_of_the_rows():
         torch.testing.assert_close(sampled_noise_sigma(y, observed, phase), full, rtol=0.05, atol=0)
     assert torch.equal(sampled_noise_sigma(y[..., :1, :], observed[..., :1, :], 1),
                        estimate_noise_sigma(y[..., :1, :], observed[..., :1, :]))  # no row to sample: all of them
+    host = sampled_noise_sigma(y, observed, 2)
+    monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")  # every sample at once, as on a GPU: the same medians
+    assert torch.equal(sampled_noise_sigma(y, observed, 2), host)
 
 
 def test_recordings_factory_streams_and_replays(tmp_path):

@@ -63,19 +63,24 @@ def estimate_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, method: st
         return _haar_sigma(depth, observed)
     if method != "second_differences":
         raise ValueError(f"method must be 'second_differences' or 'haar'; got {method!r}.")
-    b = depth.shape[0]
-    out = depth.new_zeros(b)
     d = depth.detach()
     m = observed > 0
     dh = d[..., :, :-2] - 2 * d[..., :, 1:-1] + d[..., :, 2:]
     mh = m[..., :, :-2] & m[..., :, 1:-1] & m[..., :, 2:]
     dv = d[..., :-2, :] - 2 * d[..., 1:-1, :] + d[..., 2:, :]
     mv = m[..., :-2, :] & m[..., 1:-1, :] & m[..., 2:, :]
-    if not host_path(depth.device):  # every sample at once, no value read on the host: the same medians
+    return _second_difference_mad(dh, mh, dv, mv, depth)
+
+
+def _second_difference_mad(dh, mh, dv, mv, like: torch.Tensor) -> torch.Tensor:
+    """(B,): the noise std from the MAD of the measured second differences ``dh``, ``dv`` (masks ``mh``, ``mv``); 0
+    for a sample with fewer than 16."""
+    out = like.new_zeros(like.shape[0])
+    if not host_path(like.device):  # every sample at once, no value read on the host: the same medians
         vals, n = _sorted_rows(torch.cat([dh.flatten(1), dv.flatten(1)], 1).abs(),
                                torch.cat([mh.flatten(1), mv.flatten(1)], 1))
         return torch.where(n >= 16, _MAD_TO_STD * _lower_median(vals, n) / 6**0.5, out)
-    for i in range(b):
+    for i in range(like.shape[0]):
         vals = torch.cat([dh[i][mh[i]], dv[i][mv[i]]]).abs()
         if vals.numel() >= 16:
             out[i] = _MAD_TO_STD * lower_median(vals) / 6**0.5
@@ -97,14 +102,7 @@ def sampled_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, phase: int,
     mu, mm, md = (m[..., r, :] for r in rows)
     dh = mid[..., :, :-2] - 2 * mid[..., :, 1:-1] + mid[..., :, 2:]
     mh = mm[..., :, :-2] & mm[..., :, 1:-1] & mm[..., :, 2:]
-    dv = up - 2 * mid + down
-    mv = mu & mm & md
-    out = depth.new_zeros(depth.shape[0])
-    for i in range(depth.shape[0]):
-        vals = torch.cat([dh[i][mh[i]], dv[i][mv[i]]]).abs()
-        if vals.numel() >= 16:
-            out[i] = _MAD_TO_STD * lower_median(vals) / 6**0.5
-    return out
+    return _second_difference_mad(dh, mh, up - 2 * mid + down, mu & mm & md, depth)
 
 
 def white_noise_sigma(depth: torch.Tensor, observed: torch.Tensor, patch: int = 5) -> torch.Tensor:
