@@ -498,6 +498,19 @@ def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_a
     assert [k for k, _ in seen] == [False, False, False]
 
 
+def test_a_given_noise_level_makes_a_kept_scale_policy_estimate_nothing(monkeypatch):
+    import torch_depth_sr.stream.restorer as restorer
+
+    def refuse(*args, **kw):
+        raise AssertionError("σ̂ estimated although the caller gave it")
+
+    monkeypatch.setattr(restorer, "sampled_noise_sigma", refuse)
+    gt, rgb = _scene()
+    s = StreamRestorer(small_model(), noise_sigma=6.0)
+    outs = [s.step(_noisy(gt, t), rgb, return_details=True) for t in range(3)]
+    assert all(r.info["noise_sigma"] == [6.0] for r in outs)
+
+
 def test_sampled_noise_sigma_estimates_the_noise_from_a_quarter_of_the_rows(monkeypatch):
     from torch_depth_sr.noise import estimate_noise_sigma, sampled_noise_sigma
 

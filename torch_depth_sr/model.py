@@ -222,7 +222,7 @@ class DepthRestorer(nn.Module):
         guide = None if rgb is None else parse_rgb(rgb, y.shape[0], y.device, y.dtype)
         K = degradation_operator(self.config.degradation, self._factor(y, guide, scale_factor))
         obs = stream.observe(observe(y, observed, guide, K, noise_sigma, integer_input, self.block_matcher, timed,
-                                     policy=stream.scale_policy(y, observed)))
+                                     policy=stream.scale_policy(y, observed, noise_sigma)))
         grad_needed = torch.is_grad_enabled() and (y.requires_grad or any(p.requires_grad for p in self.parameters()))
         t0 = _clock(timed, y.device)
         with torch.set_grad_enabled(grad_needed):
@@ -333,7 +333,7 @@ class DepthRestorer(nn.Module):
 class _NoStream:
     """The stream hooks of :meth:`DepthRestorer._run` for a frame on its own: they change nothing."""
 
-    def scale_policy(self, y: torch.Tensor, observed: torch.Tensor) -> None:
+    def scale_policy(self, y: torch.Tensor, observed: torch.Tensor, noise_sigma: NoiseSigma) -> None:
         return None  # the frame's own
 
     def observe(self, obs: Observation) -> Observation:

@@ -28,7 +28,6 @@ gradient flows through the current frame only). ``docs/stream.md`` has the measu
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass, fields, replace
 from typing import Any, NamedTuple, Optional, Union
 
@@ -163,15 +162,18 @@ class _Frame:
         self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
         self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
 
-    def scale_policy(self, y: torch.Tensor, observed: torch.Tensor) -> Optional[ScalePolicy]:
+    def scale_policy(self, y: torch.Tensor, observed: torch.Tensor, noise_sigma: NoiseSigma) -> Optional[ScalePolicy]:
         """The previous frame's scale policy while at least half of that frame was static (``keep_scale``): a
         static scene's offset, scale and noise level stay what they were, and estimating them again cost about a tenth
-        of a step (docs/stream.md); else None, estimated again."""
+        of a step (docs/stream.md); else None, estimated again. A ``noise_sigma`` the caller gives sets σ in
+        :func:`~torch_depth_sr.observation.observe`: no estimate is made then."""
         st = self.state
         if (st is None or not self.settings.keep_scale or st.policy is None or st.static_share < 0.5
                 or st.policy.offset.shape[0] != y.shape[0]):
             return None
         policy = ScalePolicy(*(t.to(device=y.device, dtype=y.dtype) for t in st.policy))
+        if noise_sigma is not None:
+            return policy
         # the noise level: a running mean of estimates from a quarter of the rows each frame (the rows cycle)
         sampled = sampled_noise_sigma(y, observed, 1 + self.index % 4)
         sigma = torch.where(sampled > 0, 0.75 * policy.sigma + 0.25 * sampled, policy.sigma)
