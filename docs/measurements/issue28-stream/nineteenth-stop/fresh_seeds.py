@@ -28,10 +28,16 @@ KEYS = ("rmse", "flicker", "trail")
 LIMITS = {"rmse": 1.0, "flicker": 0.5, "trail": 1.0}
 
 
-def _outputs(step, seq) -> np.ndarray:
+def restored_frames(step, seq) -> np.ndarray:
+    """Every frame of ``seq`` through ``step(depth, rgb)``, (T,H,W) float32."""
     with torch.no_grad():
         return np.stack([np.asarray(step(seq["depth"][t, 0], torch.from_numpy(seq["rgb"][t])), dtype=np.float32)
                          for t in range(seq["depth"].shape[0])])
+
+
+def fresh_specs(seeds) -> list:
+    """The recipes of ``STREAM_SEQUENCES`` with other seeds, named ``recipe@seed``."""
+    return [replace(s, name=f"{s.name}@{seed}", seed=seed) for seed in seeds for s in STREAM_SEQUENCES]
 
 
 def main() -> None:
@@ -40,13 +46,13 @@ def main() -> None:
     a = p.parse_args()
     torch.set_num_threads(1)
     model = default_stream_model()
-    specs = [replace(s, name=f"{s.name}@{seed}", seed=seed) for seed in a.seeds for s in STREAM_SEQUENCES]
+    specs = fresh_specs(a.seeds)
     rows = []
     for spec in tqdm(specs, desc="sequences"):
         seq = make_sequence(spec, frames=30, height=120, width=160)
         reg = regions(seq)
-        base = synthetic_metrics(_outputs(lambda d, c: restore_depth(d, c, model=model), seq), seq, reg)
-        m = synthetic_metrics(_outputs(StreamRestorer(model).step, seq), seq, reg)
+        base = synthetic_metrics(restored_frames(lambda d, c: restore_depth(d, c, model=model), seq), seq, reg)
+        m = synthetic_metrics(restored_frames(StreamRestorer(model).step, seq), seq, reg)
         r = [m[k] / base[k] for k in KEYS]
         rows.append(r)
         tqdm.write(f"{spec.name:22s} " + " ".join(f"{k} {v:.4f}" for k, v in zip(KEYS, r)) + "   stream/frame "

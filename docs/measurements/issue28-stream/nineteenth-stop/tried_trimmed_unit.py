@@ -15,16 +15,17 @@ restoration's, as ``fresh_seeds.py``: ``--set tuning`` the tuning sequences, ``-
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import numpy as np
 import torch
 
 from torch_depth_sr import restore_depth
-from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, TUNING_SEQUENCES, make_sequence
+from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
 from torch_depth_sr.stream import StreamRestorer, change, default_stream_model
 from torch_depth_sr.stream import restorer as stream_restorer
+
+from fresh_seeds import fresh_specs, restored_frames  # this folder's script (run as a script: its folder is on the path)
 
 KEYS = ("rmse", "flicker", "trail")
 
@@ -37,12 +38,6 @@ def trimmed_spread(y, observed, x, window, trim):
     keep = m * (r <= trim * plain).to(y.dtype)
     num, den = change._window_mean(r * keep, window, keep)
     return torch.where(den > 0, num / den.clamp_min(1e-12), plain)
-
-
-def _outputs(step, seq) -> np.ndarray:
-    with torch.no_grad():
-        return np.stack([np.asarray(step(seq["depth"][t, 0], torch.from_numpy(seq["rgb"][t])), dtype=np.float32)
-                         for t in range(seq["depth"].shape[0])])
 
 
 def main() -> None:
@@ -61,20 +56,19 @@ def main() -> None:
         return torch.where(static, torch.maximum(spread, remembered), spread)
 
     model = default_stream_model()
-    specs = (TUNING_SEQUENCES if a.set == "tuning" else
-             [replace(s, name=f"{s.name}@{seed}", seed=seed) for seed in range(200, 206) for s in STREAM_SEQUENCES])
+    specs = TUNING_SEQUENCES if a.set == "tuning" else fresh_specs(range(200, 206))
     rows = {"shipped": [], "trimmed": []}
     for spec in specs:
         seq = make_sequence(spec, frames=30, height=120, width=160)
         reg = regions(seq)
-        base = synthetic_metrics(_outputs(lambda d, c: restore_depth(d, c, model=model), seq), seq, reg)
+        base = synthetic_metrics(restored_frames(lambda d, c: restore_depth(d, c, model=model), seq), seq, reg)
         cells = []
         for name in rows:
             shipped = stream_restorer.local_spread, stream_restorer.remembered_spread
             if name == "trimmed":
                 stream_restorer.local_spread, stream_restorer.remembered_spread = local_spread, remembered_spread
             try:
-                m = synthetic_metrics(_outputs(StreamRestorer(model).step, seq), seq, reg)
+                m = synthetic_metrics(restored_frames(StreamRestorer(model).step, seq), seq, reg)
             finally:
                 stream_restorer.local_spread, stream_restorer.remembered_spread = shipped
             r = [m[k] / base[k] for k in KEYS]
