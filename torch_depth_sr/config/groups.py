@@ -411,7 +411,10 @@ class StreamConfig(Group):
     the whole frame and the others on crops around the pixels that changed or whose static run is younger than
     ``max_frames`` (:mod:`~torch_depth_sr.stream.crop_layers`; None: every layer everywhere). With ``keep_scale`` a
     frame is normalised with the previous frame's scale policy (offset, scale, noise σ̂, grid step) while at least half
-    of the previous frame was static, instead of estimating them again."""
+    of the previous frame was static, instead of estimating them again. ``join_cap`` bounds the noise unit a
+    measurement is compared with to its run's mean (joined, held out or confirmed), in units of the change test's
+    floor (a quarter of the frame's σ̂, or its quantisation step; None = no bound): a moving edge inflates the local
+    unit, and without the bound a mover's new measurements joined the mean of the background it covered."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by
@@ -430,6 +433,10 @@ class StreamConfig(Group):
     dilate: int = 2
     reuse_matches: bool = True
     keep_scale: bool = True
+    # 80 floors (20 σ̂): the lowest mean RMSE of 16, 40, 80 and 160 floors on the enlarged tuning set, the trail no
+    # worse than without the bound
+    # (docs/measurements/issue28-stream/nineteenth-stop/join_cap_tuning.txt)
+    join_cap: Optional[float] = 80.0
     layers: Optional[int] = None
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
@@ -437,4 +444,5 @@ class StreamConfig(Group):
                                "depth_test": positive, "camera_test": optional(real(0.0, 1.0)),
                                "outlier_test": optional(positive), "color_test": positive,
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
-                               "keep_scale": boolean, "layers": optional(integer(1))}
+                               "keep_scale": boolean, "join_cap": optional(positive),
+                               "layers": optional(integer(1))}

@@ -197,7 +197,9 @@ class _Frame:
         if test.own is not None:  # a hole has no depth to test: its own colour must not change
             static = static & ~(test.own & (obs.observed <= 0))
         evidence = st.evidence.to(dt)
-        runs = join_runs(obs.y, obs.observed, static, test.outlier, noise, evidence, st.mean.to(dt),
+        # the run's mean is compared in a unit an edge cannot inflate without bound (join_cap)
+        joining = noise if s.join_cap is None else torch.minimum(noise, s.join_cap * floor)
+        runs = join_runs(obs.y, obs.observed, static, test.outlier, joining, evidence, st.mean.to(dt),
                          st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
         self.stats["outliers_in_time"] = float(runs.outlier.float().mean())
         self.stats["held_out"] = float(runs.held_out.float().mean())

@@ -2,7 +2,7 @@
 stays) on streams of Middlebury 2006 scenes (the FITTING split): the stream model (``denoise-fast``) with each, against
 frame-by-frame restoration, on a static stream and on one with a mover.
 
-    python docs/measurements/issue28-stream/setting_2006.py [--setting keep_scale] [--frames 16]
+    python docs/measurements/issue28-stream/setting_2006.py [--setting keep_scale] [--off false --on true] [--frames 16]
         [--scenes Baby1 Cloth1 Midd1 Wood1]
 
 Each frame is the ``paper`` / ``sensor`` degradation with seed t. Prints per scene the RMSE over the frames from
@@ -11,6 +11,7 @@ worst, and the largest difference between the two streams' outputs. The held-out
 """
 from __future__ import annotations
 
+import json
 import statistics
 
 import torch
@@ -22,11 +23,13 @@ from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
 def main() -> None:
     p = arguments(__doc__, frames=16)
-    p.add_argument("--setting", default="keep_scale", help="a boolean field of StreamConfig")
+    p.add_argument("--setting", default="keep_scale", help="a field of StreamConfig")
+    p.add_argument("--off", default="false", help="its value for 'off', as JSON (default false; e.g. null)")
+    p.add_argument("--on", default="true", help="its value for 'on', as JSON (default true; e.g. 80)")
     a = p.parse_args()
     torch.set_num_threads(a.threads)
     model = default_stream_model()
-    variants = {"off": {a.setting: False}, "on": {a.setting: True}}
+    variants = {"off": {a.setting: json.loads(a.off)}, "on": {a.setting: json.loads(a.on)}}
     for case, mover, start in (("static", False, a.frames // 2), ("mover", True, MOVER_FROM)):
         for track in ("paper", "sensor"):
             ratios: dict = {k: [] for k in variants}
