@@ -652,3 +652,21 @@ def test_to_moves_the_stream_state_with_the_model_and_keeps_its_dtype():
     assert {t.device.type for t in _state_tensors(stream)} == {"meta"}
     assert {p.device.type for p in stream.parameters()} == {"meta"}
     assert [(t.dtype, t.shape) for t in _state_tensors(stream)] == before
+
+
+def test_stream_track_seeds_run_the_recipes_on_other_scenes(tmp_path):
+    """``bench --track stream --seeds``: the three recipes with the given seeds instead of the evaluated sequences."""
+    import json
+
+    from torch_depth_sr.cli import main
+    from torch_depth_sr.datasets.sequences import recipe_sequences
+
+    specs = recipe_sequences([7])
+    assert [s.seed for s in specs] == [7, 7, 7] and [s.name.split("@")[0] for s in specs] == [
+        "static-2movers", "pan-then-hold", "static-busy"]
+    out = tmp_path / "s.json"
+    assert main(["bench", "--track", "stream", "--sets", "synthetic", "--seeds", "7", "--methods", "raw",
+                 "--frames", "3", "--size", "24x32", "--json", str(out)]) == 0
+    got = json.loads(out.read_text())
+    assert got["metadata"]["seeds"] == [7]
+    assert sorted({r["sequence"] for r in got["results"]}) == sorted(s.name for s in specs)

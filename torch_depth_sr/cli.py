@@ -224,6 +224,9 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--frames", type=_positive_int, default=None, help="track stream: frames per synthetic sequence "
                    "(default 30)")
     b.add_argument("--size", default=None, help="track stream: HxW of the synthetic sequences (default 120x160)")
+    b.add_argument("--seeds", type=_non_negative_int, nargs="+", default=None,
+                   help="track stream: the synthetic recipes with these seeds instead of the evaluated sequences "
+                        "(1-3; the tuning ones are 101-103): the figures on other scenes")
     b.add_argument("--real-frames", type=_positive_int, default=None,
                    help="track stream: first frames of each real sequence (default 30)")
     b.add_argument("--real-stride", type=_positive_int, default=None,

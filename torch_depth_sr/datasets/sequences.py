@@ -18,14 +18,15 @@ Everything is a pure function of the arguments (numpy PCG64 seeded by ``[seed, f
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import cv2
 import numpy as np
 
 from ..errors import DepthSRError
 from .synthetic import make_scene
 
-__all__ = ["DEPTH_CONSTANT", "SensorModel", "make_sequence", "STREAM_SEQUENCES", "TUNING_SEQUENCES"]
+__all__ = ["DEPTH_CONSTANT", "SensorModel", "make_sequence", "recipe_sequences", "STREAM_SEQUENCES",
+           "TUNING_SEQUENCES"]
 
 DEPTH_CONSTANT = 100_000.0  # Z [mm] = C / disparity
 
@@ -70,6 +71,18 @@ TUNING_SEQUENCES = tuple(SequenceSpec(f"tune-{s.name}", seed=100 + s.seed, camer
                                       speed=s.speed, pan_frames=s.pan_frames, sensor=s.sensor)
                          for s in STREAM_SEQUENCES)
 """Other scenes with the same recipes, on which the baselines' settings are tuned (never the evaluated ones)."""
+
+
+def recipe_sequences(seeds) -> tuple:
+    """The recipes of :data:`STREAM_SEQUENCES` with other ``seeds`` (new scenes, movers and noise), named
+    ``recipe@seed``, seed by seed: how the stream track's figures carry over to other scenes
+    (``bench --track stream --seeds``). Seeds 1–3 are the evaluated sequences, 101–103 the tuning ones.
+
+    Examples:
+        >>> [s.name for s in recipe_sequences([200])]
+        ['static-2movers@200', 'pan-then-hold@200', 'static-busy@200']
+    """
+    return tuple(replace(s, name=f"{s.name}@{seed}", seed=int(seed)) for seed in seeds for s in STREAM_SEQUENCES)
 
 
 def _mover(rng: np.random.Generator, h: int, w: int, speed: tuple) -> dict:

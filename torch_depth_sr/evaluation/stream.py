@@ -12,8 +12,10 @@ Methods (``--methods``; default all but ``rs-temporal+frame``):
 * ``stream`` — the same model in a :class:`~torch_depth_sr.StreamRestorer`.
 
 **Synthetic sequences** (``--sets synthetic``): :data:`~torch_depth_sr.datasets.sequences.STREAM_SEQUENCES`
-(``--frames`` frames of ``--size``), with ground truth. Outputs that keep holes (``raw``, ``rs-temporal``) have them
-pulled-pushed (:func:`~torch_depth_sr.fill.fill_holes`) before they are scored, every pixel is scored; mm.
+(``--frames`` frames of ``--size``), with ground truth; with ``--seeds`` their recipes with those seeds instead
+(:func:`~torch_depth_sr.datasets.sequences.recipe_sequences`: other scenes, to see how the figures carry over).
+Outputs that keep holes (``raw``, ``rs-temporal``) have them pulled-pushed (:func:`~torch_depth_sr.fill.fill_holes`)
+before they are scored, every pixel is scored; mm.
 
 * ``rmse``, ``mae``: per frame, averaged over the frames;
 * ``flicker``: the temporal std of the error over the frames from which the camera holds still, at the pixels whose
@@ -187,10 +189,11 @@ def _nanmean(rows: list, axis: int = 0) -> np.ndarray:
 
 
 def _synthetic(args, methods: dict, frames: int, size: tuple) -> tuple[list, dict]:
-    from ..datasets.sequences import STREAM_SEQUENCES, make_sequence
+    from ..datasets.sequences import STREAM_SEQUENCES, make_sequence, recipe_sequences
 
+    seeds = getattr(args, "seeds", None)
     rows, keep = [], {}
-    for spec in STREAM_SEQUENCES:
+    for spec in recipe_sequences(seeds) if seeds else STREAM_SEQUENCES:
         seq = make_sequence(spec, frames=frames, height=size[0], width=size[1])
         reg = regions(seq)
         outs = {}
@@ -397,7 +400,7 @@ def run_stream_track(args: argparse.Namespace) -> int:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         meta = metadata(device)
         meta.update(track="stream", model=model_name, frames=frames, size=list(size), sets=sets,
-                    rs_params=RS_TUNED)
+                    seeds=getattr(args, "seeds", None), rs_params=RS_TUNED)
         Path(args.json).write_text(json.dumps({"metadata": meta, "summary": summary, "results": rows}, indent=1))
         print(f"json: {args.json}")
     return 0

@@ -8,19 +8,19 @@ sequences (seeds 101–103), with other seeds (default 200–205): new scenes, m
 changed, 30 frames at 120×160 as the track. The stream model (``denoise-fast``) as ``StreamRestorer()`` runs it, and
 frame-by-frame restoration with the same model; the stream track's scores (``evaluation.stream.synthetic_metrics``).
 Per sequence: RMSE, flicker and trail of the stream divided by frame-by-frame's, and the absolute values; then how
-many sequences meet each target of issue 28 (RMSE and trail ≤ 1, flicker ≤ 0.5).
+many sequences meet each target of issue 28 (RMSE and trail ≤ 1, flicker ≤ 0.5). The stream track gives the
+absolute figures of the same scenes: ``torch-depth-sr bench --track stream --sets synthetic --seeds 200 201 202 203 204
+205 --methods frame stream --per-scene``.
 """
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
-
 import numpy as np
 import torch
 from tqdm import tqdm
 
 from torch_depth_sr import restore_depth
-from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
+from torch_depth_sr.datasets.sequences import make_sequence, recipe_sequences
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
@@ -35,18 +35,13 @@ def restored_frames(step, seq) -> np.ndarray:
                          for t in range(seq["depth"].shape[0])])
 
 
-def fresh_specs(seeds) -> list:
-    """The recipes of ``STREAM_SEQUENCES`` with other seeds, named ``recipe@seed``."""
-    return [replace(s, name=f"{s.name}@{seed}", seed=seed) for seed in seeds for s in STREAM_SEQUENCES]
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--seeds", type=int, nargs="+", default=list(range(200, 206)))
     a = p.parse_args()
     torch.set_num_threads(1)
     model = default_stream_model()
-    specs = fresh_specs(a.seeds)
+    specs = recipe_sequences(a.seeds)
     rows = []
     for spec in tqdm(specs, desc="sequences"):
         seq = make_sequence(spec, frames=30, height=120, width=160)

@@ -21,11 +21,11 @@ import torch
 from tqdm import tqdm
 
 from torch_depth_sr import restore_depth
-from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence
+from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
-from fresh_seeds import KEYS, fresh_specs, restored_frames  # this folder's script (its folder is on the path)
+from fresh_seeds import KEYS, restored_frames  # this folder's script (its folder is on the path)
 
 
 def main() -> None:
@@ -35,8 +35,8 @@ def main() -> None:
     a = p.parse_args()
     torch.set_num_threads(1)
     model = default_stream_model()
-    specs = (fresh_specs(range(300, 304)) + list(TUNING_SEQUENCES) if a.set == "tuning"
-             else fresh_specs(range(200, 206)))
+    specs = (recipe_sequences(range(300, 304)) + TUNING_SEQUENCES if a.set == "tuning"
+             else recipe_sequences(range(200, 206)))
     values = [None if v == "none" else float(v) for v in a.values]
     ratios = {v: [] for v in values}
     for spec in tqdm(specs, desc="scenes"):

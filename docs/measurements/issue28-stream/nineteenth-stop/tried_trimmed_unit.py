@@ -21,12 +21,12 @@ import numpy as np
 import torch
 
 from torch_depth_sr import restore_depth
-from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence
+from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
 from torch_depth_sr.stream import StreamRestorer, change, default_stream_model
 from torch_depth_sr.stream import restorer as stream_restorer
 
-from fresh_seeds import fresh_specs, restored_frames  # this folder's script (its folder is on the path)
+from fresh_seeds import restored_frames  # this folder's script (its folder is on the path)
 
 KEYS = ("rmse", "flicker", "trail")
 
@@ -71,7 +71,7 @@ def main() -> None:
         return torch.where(static, torch.maximum(spread, remembered), spread)
 
     model = default_stream_model()
-    specs = TUNING_SEQUENCES if a.set == "tuning" else fresh_specs(range(200, 206))
+    specs = TUNING_SEQUENCES if a.set == "tuning" else recipe_sequences(range(200, 206))
     rows = {"shipped": [], a.unit: []}
     for spec in specs:
         seq = make_sequence(spec, frames=30, height=120, width=160)
