@@ -19,6 +19,7 @@ Everything is a pure function of the arguments (numpy PCG64 seeded by ``[seed, f
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Iterable
 import cv2
 import numpy as np
 
@@ -73,7 +74,7 @@ TUNING_SEQUENCES = tuple(SequenceSpec(f"tune-{s.name}", seed=100 + s.seed, camer
 """Other scenes with the same recipes, on which the baselines' settings are tuned (never the evaluated ones)."""
 
 
-def recipe_sequences(seeds) -> tuple:
+def recipe_sequences(seeds: Iterable[int]) -> tuple:
     """The recipes of :data:`STREAM_SEQUENCES` with other ``seeds`` (new scenes, movers and noise), named
     ``recipe@seed``, seed by seed: how the stream track's figures carry over to other scenes
     (``bench --track stream --seeds``). Seeds 1–3 are the evaluated sequences, 101–103 the tuning ones.
