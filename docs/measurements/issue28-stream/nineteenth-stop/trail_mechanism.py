@@ -3,12 +3,13 @@
 run update receive).
 
     python docs/measurements/issue28-stream/nineteenth-stop/trail_mechanism.py [--seed 202] [--frame 25] [--row 110]
-        [--cols 147 160]
+        [--cols 147 160] [--join-cap none]
 
 Per frame, along the row: the truth, the raw measurement, the previous restored frame (the change test's reference),
 the change test's noise unit (depth units), its verdict, what the model sees as the measurement (the run's mean on
 static pixels; the offset where a value was dropped as an outlier in time), the temporal prior's weight, and the
-stream's output beside frame-by-frame restoration's.
+stream's output beside frame-by-frame restoration's. ``--join-cap`` (default ``none``: the stream as it was when
+this trace was made, before ``StreamConfig.join_cap``; ``80``: today's default).
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ def main() -> None:
     p.add_argument("--frame", type=int, default=25)
     p.add_argument("--row", type=int, default=110)
     p.add_argument("--cols", type=int, nargs=2, default=(147, 160))
+    p.add_argument("--join-cap", default="none", help="StreamConfig.join_cap: none (the default here) or a number")
     a = p.parse_args()
     torch.set_num_threads(1)
     seen: dict = {}
@@ -49,7 +51,7 @@ def main() -> None:
     spec = replace(STREAM_SEQUENCES[0], name=f"static-2movers@{a.seed}", seed=a.seed)
     seq = make_sequence(spec, frames=a.frame + 1, height=120, width=160)
     model = default_stream_model()
-    stream = StreamRestorer(model)
+    stream = StreamRestorer(model, {"join_cap": None if a.join_cap == "none" else float(a.join_cap)})
     c0, c1 = a.cols
 
     def show(name, v, fmt="{:6.0f}"):
