@@ -21,6 +21,7 @@ from .singular import detect_singular, supported_or_line
 from .stream.change import _nearest_distance as nearest_distance
 from .stream.change import camera_moved, colour_changes, depth_votes, local_spread, remembered_spread
 from .stream.matching import dilate
+from .stream.shift import shifted_windows
 from .stream.runs import grow_runs, join_runs
 
 __all__ = ["warmup"]
@@ -85,6 +86,7 @@ def _warmup_steps(dtype: torch.dtype):
             depth_votes(x, trust, 3, 0.5)
             colour_changes(rgb, rgb.flip(-1), 3, 0.03)
             camera_moved(rgb, rgb.flip(-1))
+            shifted_windows(10 * x, trust, 10 * x.roll(1, -1), x + 0.5, 0.5)
 
     def stream_runs():  # a stream's run updates before and after the model
         s, b, one = StreamConfig(), x > 0.5, torch.ones(1, dtype=dtype)

@@ -395,7 +395,10 @@ class StreamConfig(Group):
     around it, the mean colour change exceeds ``color_test`` (the frame's median change removed), most measurements
     lie farther than ``depth_test`` from the previous estimate; changed pixels are dilated by ``dilate``. When the
     colour image as a whole shifted (its change falls below ``camera_test`` times the unshifted change; None = never),
-    the camera moved and every pixel is changed. In a static window a measurement that matches no previous value
+    the camera moved and every pixel is changed. A measured pixel is changed too where its 5×5 window departs from the
+    previous estimate and one of that estimate's one-pixel shifts matches the window with less than ``shift_test``
+    times the unshifted error (:mod:`~torch_depth_sr.stream.shift`: an edge that moved by a pixel, which the depth
+    test's one-pixel tolerance does not see; None = never). In a static window a measurement that matches no previous value
     near it by ``outlier_test`` is an outlier in time, dropped where the past was measured, unless it repeats the
     previous frame's dropped or held-out value (None = never). One that left the mean of its run by as much is held
     out the first time, the pixel keeping the mean (a mixed pixel at a depth edge takes the other side's depth in
@@ -437,6 +440,11 @@ class StreamConfig(Group):
     # leave no scene's RMSE above frame by frame's and the flicker and trail within 0.5 % of no bound's
     # (docs/measurements/issue28-stream/nineteenth-stop/join_cap_tuning.py)
     join_cap: Optional[float] = 80.0
+    # of 0.3, 0.5 and 0.7, with windows of 3, 5 and 7 px, on 45 synthetic sequences (the tuning ones and the recipes'
+    # seeds 300-303 and 400-409): the lowest mean trail among those that leave no sequence's RMSE above frame by
+    # frame's and the mean flicker at most the stream's without the test (docs/measurements/issue28-stream/
+    # twentieth-stop/shift_test_tuning.py)
+    shift_test: Optional[float] = 0.5
     layers: Optional[int] = None
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
@@ -445,4 +453,5 @@ class StreamConfig(Group):
                                "outlier_test": optional(positive), "color_test": positive,
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
                                "keep_scale": boolean, "join_cap": optional(positive),
+                               "shift_test": optional(real(0.0, 1.0)),
                                "layers": optional(integer(1))}

@@ -15,7 +15,10 @@ A pixel is *changed* (:func:`change_test`) when its colour or its depth changed 
   surface changed), at least a quarter of the frame's noise level and the quantisation step. A majority vote is a
   median test: flying pixels and impulses, a minority of any window even at depth edges, flag nothing, while a
   surface that moved flags its whole window. Three pseudo-votes of "unchanged" join every window, so that a window
-  of a few measured pixels among holes needs all of them.
+  of a few measured pixels among holes needs all of them;
+* shift (``shift_test``): the window matches a one-pixel shift of the previous estimate much better than the
+  estimate where it was (:mod:`~torch_depth_sr.stream.shift`): an edge that moved by a pixel, which the depth test's
+  nearest value within one pixel does not see. Its unit is the run's bounded one (``join_cap``).
 
 The changed pixels are then dilated by ``dilate`` pixels (a moving edge's neighbours). In a static window a single
 measured pixel can still disagree with the past: if its value matches none of the previous values near it (``d1 >
@@ -39,6 +42,7 @@ from ..config import StreamConfig
 from ..native import host_kernel
 from ..selection import lower_median
 from .matching import dilate
+from .shift import shifted_windows
 
 __all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "colour_changes", "depth_votes", "distances",
            "local_spread", "remembered_spread"]
@@ -234,12 +238,17 @@ class ChangeTest(NamedTuple):
 
 def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor, noise: torch.Tensor,
                 rgb: Optional[torch.Tensor], previous_rgb: Optional[torch.Tensor],
-                settings: StreamConfig) -> ChangeTest:
+                settings: StreamConfig, shift_noise: Optional[torch.Tensor] = None) -> ChangeTest:
     """The change test of one frame (module docstring); ``y``, ``previous`` and ``noise`` in the units of one
-    frame. Without ``settings.outlier_test`` no pixel is an *outlier*."""
+    frame. Without ``settings.outlier_test`` no pixel is an *outlier*. With ``settings.shift_test`` a window that a
+    one-pixel shift of ``previous`` matches better is changed too (:func:`~torch_depth_sr.stream.shift.shifted_windows`,
+    in units of ``shift_noise``, by default ``noise``)."""
     with torch.no_grad():
         d1 = _nearest_distance(y, observed, previous, noise)
         changed = depth_votes(d1, observed, settings.window, settings.depth_test) > 0.5
+        if settings.shift_test is not None:
+            unit = (noise if shift_noise is None else shift_noise).expand_as(y)
+            changed = changed | shifted_windows(y, observed, previous, unit, settings.shift_test)
         seen = own = None
         if rgb is not None and previous_rgb is not None:
             previous_rgb = previous_rgb.to(rgb)

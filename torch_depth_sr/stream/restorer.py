@@ -192,13 +192,13 @@ class _Frame:
         scale = obs.scale.to(dt).view(-1, 1, 1, 1)
         floor = torch.maximum(0.25 * obs.noise, obs.grid_step).to(dt).view(-1, 1, 1, 1)
         noise = torch.maximum(st.spread.to(dt) / scale, floor)
-        test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s)
+        # the run's mean and the shift test read a unit an edge cannot inflate without bound (join_cap)
+        joining = noise if s.join_cap is None else torch.minimum(noise, s.join_cap * floor)
+        test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s, shift_noise=joining)
         static = ~test.changed
         if test.own is not None:  # a hole has no depth to test: its own colour must not change
             static = static & ~(test.own & (obs.observed <= 0))
         evidence = st.evidence.to(dt)
-        # the run's mean is compared in a unit an edge cannot inflate without bound (join_cap)
-        joining = noise if s.join_cap is None else torch.minimum(noise, s.join_cap * floor)
         runs = join_runs(obs.y, obs.observed, static, test.outlier, joining, evidence, st.mean.to(dt),
                          st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
         self.stats["outliers_in_time"] = float(runs.outlier.float().mean())
