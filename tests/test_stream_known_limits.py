@@ -47,7 +47,7 @@ def test_join_cap_keeps_a_slow_mover_nearer_its_measurements():
 def test_the_shift_test_keeps_a_slow_mover_where_it_is_measured():
     # the same scene over 26 frames: without the shift test the mover's edge pixels left their runs a frame late,
     # every frame (held out, or dropped as outliers in time), and 522 well-measured pixels came out more than 100 mm
-    # off, against 241 frame by frame; with it 168 (the twentieth stop; 1255 before join_cap)
+    # off, against 241 frame by frame; with it 164 (the twentieth stop; 1255 before join_cap)
     stream, frame = _far_off(202, 26)
     (without,) = _far_off(202, 26, {"shift_test": None}, frame_by_frame=False)
     assert stream <= frame < without, (stream, frame, without)
