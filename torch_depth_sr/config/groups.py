@@ -396,9 +396,10 @@ class StreamConfig(Group):
     lie farther than ``depth_test`` from the previous estimate; changed pixels are dilated by ``dilate``. When the
     colour image as a whole shifted (its change falls below ``camera_test`` times the unshifted change; None = never),
     the camera moved and every pixel is changed. A measured pixel is changed too where its 5×5 window departs from the
-    previous estimate and one of that estimate's one-pixel shifts matches the window with less than ``shift_test``
-    times the unshifted error (:mod:`~torch_depth_sr.stream.shift`: an edge that moved by a pixel, which the depth
-    test's one-pixel tolerance does not see; None = never). In a static window a measurement that matches no previous value
+    previous estimate (a pixel 4 units off, the unit at least 2 σ̂) and one of that estimate's one-pixel shifts
+    matches the window with less than ``shift_test`` times the unshifted error (:mod:`~torch_depth_sr.stream.shift`:
+    an edge that moved by a pixel, which the depth test's one-pixel tolerance does not see; None = never).
+    In a static window a measurement that matches no previous value
     near it by ``outlier_test`` is an outlier in time, dropped where the past was measured, unless it repeats the
     previous frame's dropped or held-out value (None = never). One that left the mean of its run by as much is held
     out the first time, the pixel keeping the mean (a mixed pixel at a depth edge takes the other side's depth in
