@@ -441,8 +441,8 @@ class StreamConfig(Group):
     # leave no scene's RMSE above frame by frame's and the flicker and trail within 0.5 % of no bound's
     # (docs/measurements/issue28-stream/nineteenth-stop/join_cap_tuning.py)
     join_cap: Optional[float] = 80.0
-    # of 0.3, 0.5 and 0.7, with windows of 3, 5 and 7 px, on 45 synthetic sequences (the tuning ones and the recipes'
-    # seeds 300-303 and 400-409): the lowest mean trail among those that leave no sequence's RMSE above frame by
+    # of 0.3, 0.5 and 0.7, on 45 synthetic sequences (the tuning ones and the recipes' seeds 300-303 and 400-409):
+    # the lowest mean trail among those that leave no sequence's RMSE above frame by
     # frame's and the mean flicker at most the stream's without the test (docs/measurements/issue28-stream/
     # twentieth-stop/shift_test_tuning.py)
     shift_test: Optional[float] = 0.5

@@ -18,7 +18,7 @@ A pixel is *changed* (:func:`change_test`) when its colour or its depth changed 
   of a few measured pixels among holes needs all of them;
 * shift (``shift_test``): the window matches a one-pixel shift of the previous estimate much better than the
   estimate where it was (:mod:`~torch_depth_sr.stream.shift`): an edge that moved by a pixel, which the depth test's
-  nearest value within one pixel does not see. Its unit is the run's bounded one (``join_cap``).
+  nearest value within one pixel does not see. Its unit is the run's bounded one (``join_cap``), at least 2 σ̂.
 
 The changed pixels are then dilated by ``dilate`` pixels (a moving edge's neighbours). In a static window a single
 measured pixel can still disagree with the past: if its value matches none of the previous values near it (``d1 >
