@@ -368,6 +368,34 @@ def test_later_layers_on_crops_equal_the_whole_frame_where_everything_changed():
     assert callable(run_later_layers)
 
 
+def test_off_the_cpu_the_later_layers_run_on_the_whole_frame(monkeypatch):
+    """On the device path (a GPU's) no crops are cut: a moved object's pixels still get every layer, the rest of the
+    frame keeps the first layer's values, as on the CPU where it holds crops (docs/measurements/h100-2026-12-05)."""
+    from torch_depth_sr.stream import crop_layers
+
+    gt, rgb = _scene()
+    moved = _noisy(gt, 9).astype(np.float32)
+    moved[10:20, 5:15] = 700.0
+    rgb2 = rgb.copy()
+    rgb2[:, 10:20, 5:15] = 0.9
+    outs = {}
+    for path in ("host", "device"):
+        if path == "device":
+            monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
+        cut = []
+        monkeypatch.setattr(crop_layers, "crops", lambda *a, cut=cut, real=crop_layers.crops: cut.append(1) or real(*a))
+        model = DepthRestorer(num_layers=3, block_matching={"search_window": 7, "k": 6, "match_layers": (0,)})
+        s = StreamRestorer(model, {"layers": 1, "max_frames": 3})  # no re-matching in the later layers: croppable
+        for t in range(5):
+            s.step(_noisy(gt, t), rgb)
+        outs[path] = (s.step(moved, rgb2), cut)
+        monkeypatch.undo()
+    assert outs["host"][1] and not outs["device"][1]  # crops on the CPU only
+    host, device = outs["host"][0], outs["device"][0]
+    assert np.abs(host[10:20, 5:15] - 700.0).max() < 5.0 and np.abs(device[10:20, 5:15] - 700.0).max() < 5.0
+    assert np.abs(host - device).max() < 1.0  # the crops' own CG step sizes apart, the same frame
+
+
 def test_change_test_sees_motion_and_ignores_noise_and_outliers():
     from torch_depth_sr.stream import change_test
 

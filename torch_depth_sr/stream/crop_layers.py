@@ -23,6 +23,7 @@ import torch
 from torch import nn
 
 from ..guidance import NoGuidance
+from ..native import host_path
 from ..observation import Observation
 from ..state import RestorationState
 from ..terms import Rematch
@@ -73,7 +74,10 @@ def run_later_layers(layers: nn.ModuleList, state: RestorationState, obs: Observ
     if len(layers) == 0 or not bool(changed.any()):
         return state
     h, w = state.x.shape[-2:]
-    boxes = crops(changed, padding(obs, len(layers))) if _croppable(layers, obs) else []
+    # off the CPU the whole frame: a GPU at these sizes is bound by kernel launches, which each crop repeats, and
+    # finding the crops reads the changed pixels on the host (docs/measurements/h100-2026-12-05)
+    cut = _croppable(layers, obs) and host_path(state.x.device)
+    boxes = crops(changed, padding(obs, len(layers))) if cut else []
     area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
     if not boxes or area >= 0.8 * h * w:
         whole = (slice(0, h), slice(0, w))
