@@ -171,6 +171,8 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
             allowed = near if active is None else near & active
             if host_path(x.device):
                 pixels = _flat_pixels(allowed.expand(b, 1, h, w), h, w)
+        elif active is not None and active.shape[-2:] == (h, w) and host_path(x.device):
+            pixels = _flat_pixels(active.expand(b, 1, h, w), h, w)  # a per-pixel active: those windows only
         median, side_share = _sided_median(x, guide, int(radius), sigma_color, sigma_space, cutoff, pixels)
         move = side_share > share
         if allowed is not None:

@@ -231,9 +231,7 @@ class DepthRestorer(nn.Module):
                           guidance=self._guidance(guide, initial.state.x))
             state = initial.state
             state = stream.run_layers(self.layers, state, obs)
-            x = state.x
-            for step in self.post[obs.task]:
-                x = step(x, state, obs, initial)
+            x = stream.post(self.post[obs.task], state.x, state, obs, initial)
         if timed:
             obs.log.timings["total"] = _clock(timed, x.device) - t0
         x = obs.denormalise(x)
@@ -346,6 +344,12 @@ class _NoStream:
         for layer in layers:
             state = layer(state, obs)
         return state
+
+    def post(self, steps: nn.ModuleList, x: torch.Tensor, state: RestorationState, obs: Observation,
+             initial: InitialEstimate) -> torch.Tensor:
+        for step in steps:
+            x = step(x, state, obs, initial)
+        return x
 
     def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
         pass

@@ -418,7 +418,12 @@ class StreamConfig(Group):
     of the previous frame was static, instead of estimating them again. ``join_cap`` bounds the noise unit a
     measurement is compared with to its run's mean (joined, held out or confirmed), in units of the change test's
     floor (a quarter of the frame's σ̂, or its quantisation step; None = no bound): a moving edge inflates the local
-    unit, and without the bound a mover's new measurements joined the mean of the background it covered."""
+    unit, and without the bound a mover's new measurements joined the mean of the background it covered.
+
+    A static pixel whose run has its full mean keeps its previous output while the layers' value there stays within
+    ``hold`` noise units (``join_cap``'s bounded unit) of the value that output was computed from: the post-steps (edge
+    snap, edge refit, the refiner) act on the other pixels only, which on sensor input with flying pixels is most of
+    what a step saves (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere)."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by
@@ -446,6 +451,11 @@ class StreamConfig(Group):
     # frame's and the mean flicker at most the stream's without the test (docs/measurements/issue28-stream/
     # twentieth-stop/shift_test_tuning.py)
     shift_test: Optional[float] = 0.5
+    # the speed against the accuracy: of 0.05, 0.1, 0.25, 0.5, 1 and 2 (a 640×480 step on moving sensor input 0.91, 0.84,
+    # 0.75, 0.76, 0.74, 0.73 cold frames; 1.10-1.15 without), the largest whose 2006 streams (fitting split) stay within
+    # 0.5 % of no hold's mean ratio to frame by frame (0.1: +0.1 %; 0.25: +1.4 %), the 45 synthetic fitting sequences no
+    # worse (docs/measurements/issue28-stream/twenty-first-stop/)
+    hold: Optional[float] = 0.1
     layers: Optional[int] = None
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
@@ -454,5 +464,5 @@ class StreamConfig(Group):
                                "outlier_test": optional(positive), "color_test": positive,
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
                                "keep_scale": boolean, "join_cap": optional(positive),
-                               "shift_test": optional(real(0.0, 1.0)),
+                               "shift_test": optional(real(0.0, 1.0)), "hold": optional(positive),
                                "layers": optional(integer(1))}

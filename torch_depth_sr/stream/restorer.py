@@ -3,7 +3,7 @@
 What a frame leaves for the next (:class:`StreamState`): the restored depth; per pixel the *age* (frames of its
 static run), the *evidence* (trusted measurements of the run, decaying over holes), the mean of the run's
 measurements, whether the output had a value, the confidence, the local noise spread; the colour image and the last
-matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four hooks of :class:`_Frame`:
+matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the five hooks of :class:`_Frame`:
 
 1. ``observe`` — the change test (:func:`~torch_depth_sr.stream.change.change_test`) splits static from changed
    pixels (a moving object, what it uncovers, a moved camera); outliers in time are dropped where the past was
@@ -19,7 +19,10 @@ matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the four h
    frame and the others only where the scene changed or the static run is younger than ``max_frames``, on crops
    around those pixels (:mod:`~torch_depth_sr.stream.crop_layers`; None, the default: every layer on the whole
    frame);
-4. ``keep`` — the state for the next frame.
+4. ``post`` — the post-steps, except on static pixels with a full run whose layers' value stayed within
+   ``settings.hold`` of the value their previous output came from: those keep that output
+   (:mod:`~torch_depth_sr.stream.post_hold`);
+5. ``keep`` — the state for the next frame.
 
 A frame with no state (the first after construction or :meth:`StreamRestorer.reset`) is the per-frame model's,
 bit for bit. The state is kept without gradient (truncated back-propagation through time: a training step's
@@ -45,6 +48,7 @@ from ..state import RestorationState
 from ..terms import TemporalPriorTerm
 from .change import change_test, local_spread, remembered_spread
 from .crop_layers import run_later_layers
+from .post_hold import run_post_steps
 from .matching import StreamMatcher, dilate, search_radius
 from .runs import grow_runs, join_runs
 
@@ -90,6 +94,7 @@ class StreamState:
     match_weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None  # the matches' weights, the temperature
     policy: Optional[ScalePolicy] = None  # the observation's scale policy (offset, scale, σ, grid step, percentiles)
     static_share: float = 1.0  # the share of static pixels (1 on a first frame: it found nothing changed)
+    anchor: Optional[torch.Tensor] = None  # (B,1,H,W) the layers' value the output came from (settings.hold)
 
 
 class StreamResult(NamedTuple):
@@ -166,6 +171,9 @@ class _Frame:
         self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
         self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
         self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
+        self.layers_x: Optional[torch.Tensor] = None  # the layers' value, before the post-steps (post)
+        self.steady: Optional[torch.Tensor] = None  # the pixels whose previous output is held (post)
+        self.unit: Optional[torch.Tensor] = None  # the bounded noise unit of the runs (observe), normalised
 
     def scale_policy(self, y: torch.Tensor, observed: torch.Tensor, noise_sigma: NoiseSigma) -> Optional[ScalePolicy]:
         """The previous frame's scale policy while at least half of that frame was static (``keep_scale``): a
@@ -213,6 +221,7 @@ class _Frame:
         obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches)
         self.departed = runs.departed.detach()
         self.static, self.warm, self.fresh = static, True, runs.fresh
+        self.unit = joining
         obs = replace(obs, temporal=TemporalPrior(target, runs.weight, static, evidence, runs.averaged,
                                                   runs.restarted, test.seen))
         if s.reuse_matches and st.matches is not None:
@@ -248,6 +257,25 @@ class _Frame:
             # (max_frames measurements): on crops around those pixels (crop_layers)
             state = run_later_layers(layers[len(first):], state, obs, self.fresh)
         return state
+
+    def post(self, steps: nn.ModuleList, x: torch.Tensor, state: RestorationState, obs: Observation,
+             initial: InitialEstimate) -> torch.Tensor:
+        """The post-steps; with ``settings.hold`` on a warm frame a static pixel whose run has its full mean keeps its
+        previous output while the layers' value ``x`` stays within ``hold`` units of the value that output came from
+        (:mod:`~torch_depth_sr.stream.post_hold`)."""
+        self.layers_x = x.detach()
+        st, hold = self.state, self.settings.hold
+        if hold is not None and self.warm and st.anchor is not None:
+            anchor = obs.normalise(st.anchor.to(x))
+            self.steady = ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
+            self.stats["held"] = float(self.steady.float().mean())
+        return run_post_steps(steps, x, state, obs, initial, self.steady,
+                              None if self.steady is None else obs.temporal.target)
+
+    def _anchor(self, x: torch.Tensor, obs: Observation) -> torch.Tensor:
+        """(B,1,H,W) depth units: the layers' value each output was computed from (kept where the output was held)."""
+        now = obs.denormalise(self.layers_x.to(x))
+        return now if self.steady is None else torch.where(self.steady, self.state.anchor.to(x), now)
 
     def _from_past(self, obs: Observation) -> torch.Tensor:
         """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""
@@ -294,7 +322,8 @@ class _Frame:
                                     confidence=confidence, spread=spread, rgb=rgb, matches=matches,
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed,
                                     match_weights=weights, policy=ScalePolicy(*(t.detach() for t in obs.policy)),
-                                    static_share=self.stats.get("static", 1.0))
+                                    static_share=self.stats.get("static", 1.0),
+                                    anchor=self._anchor(x, obs))
 
 
 DEFAULT_STREAM_MODEL = "denoise-fast"

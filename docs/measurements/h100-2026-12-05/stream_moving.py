@@ -34,6 +34,7 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=1)
     p.add_argument("--frames", type=int, default=12)
     p.add_argument("--skip", type=int, default=3, help="frames not counted (the first is the stream's cold one)")
+    p.add_argument("--settings", default=None, help="StreamConfig changes as JSON, e.g. '{\"hold\": null}'")
     p.add_argument("--json", default=None)
     a = p.parse_args()
     h, w = (int(t) for t in a.size.split("x"))
@@ -42,7 +43,7 @@ def main() -> None:
     depth = torch.from_numpy(np.stack([s["depth"].astype(np.float32) for s in seqs], 1)).to(a.device)  # (T,B,1,H,W)
     rgb = torch.from_numpy(np.stack([s["rgb"] for s in seqs], 1)).to(a.device)
     model = default_stream_model().to(a.device).eval()
-    stream = StreamRestorer(model)
+    stream = StreamRestorer(model, json.loads(a.settings) if a.settings else None)
     steps, colds = [], []
     with torch.no_grad():
         restore_depth(depth[0], rgb[0], model=model)  # warm-up of the cold path (first CUDA kernels, caches)
@@ -58,7 +59,7 @@ def main() -> None:
             steps.append(t1 - t0)
             colds.append(t2 - t1)
     kept = range(a.skip, a.frames)
-    row = {"device": a.device, "gpu": torch.cuda.get_device_name() if a.device.startswith("cuda") else None,
+    row = {"device": a.device, "settings": a.settings, "gpu": torch.cuda.get_device_name() if a.device.startswith("cuda") else None,
            "size": a.size, "batch": a.batch, "sequences": [s.name for s in specs], "frames": a.frames,
            "step_ms": 1e3 * statistics.median(steps[i] for i in kept) / a.batch,
            "cold_ms": 1e3 * statistics.median(colds[i] for i in kept) / a.batch,

@@ -1,0 +1,56 @@
+"""The post-steps of a stream frame where the layers' value moved; elsewhere the previous output is held.
+
+On sensor input a cold frame spends about as long in its post-steps as in its layers: flying pixels make the singular
+gate switch the edge steps on, and the edge snap and the edge refit sort a colour window at every pixel near a depth
+edge (:mod:`~torch_depth_sr.edge_snap`; 180–210 ms of a 480 ms frame at 640×480 on a 2-core CPU). In a stream, a
+static pixel whose run has its full mean (``fresh`` False: the pixels the later layers leave alone,
+:mod:`~torch_depth_sr.stream.crop_layers`) and whose layers' value stayed within ``StreamConfig.hold`` noise units of
+the value its previous output was computed from is *steady*: it keeps that output. The edge steps act on the other
+pixels only, which the CPU kernels compute alone. The refiner runs on the whole frame (a few convolutions) and is
+kept at those pixels only. The do-no-harm band (:class:`~torch_depth_sr.post_steps.FidelityBandStep`) then bounds the
+whole frame as in a cold one.
+
+The test is on the layers' value, not the change test alone: a change the change test misses still moves the layers'
+value towards the measurements, and the pixel gets the post-steps again once it has moved by ``hold`` units. Holding
+the output without it let such a change stay for as long as the pixel was called static, and gave an RMSE above
+frame by frame's on one evaluated sequence; holding only the post-steps' correction passed the layers'
+frame-to-frame change through at edges, where the refit's median is steadier, and raised the flicker by half
+(``docs/measurements/h100-2026-12-05/README.md``).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Optional
+
+import torch
+from torch import nn
+
+from ..initial import InitialEstimate
+from ..observation import Observation
+from ..post_steps import FidelityBandStep
+from ..state import RestorationState
+
+__all__ = ["run_post_steps"]
+
+
+def run_post_steps(steps: nn.ModuleList, x: torch.Tensor, state: RestorationState, obs: Observation,
+                   initial: InitialEstimate, steady: Optional[torch.Tensor],
+                   held: Optional[torch.Tensor]) -> torch.Tensor:
+    """``steps`` on the layers' value ``x`` (B,1,H,W), except that ``steady`` pixels (B,1,H,W bool) take ``held``
+    (the previous output, normalised as ``x``) and the edge steps skip them; the band then everywhere. ``steady``
+    None: every step everywhere, as in a cold frame."""
+    if steady is None:
+        for step in steps:
+            x = step(x, state, obs, initial)
+        return x
+    # the edge steps act where the singular gate found outliers (``clean`` False): not on steady pixels
+    local = replace(state, clean=steady if state.clean is None else state.clean | steady)
+    out = x
+    for step in steps:
+        if not isinstance(step, FidelityBandStep):
+            out = step(out, local, obs, initial)
+    out = torch.where(steady, held.to(out), out)
+    for step in steps:
+        if isinstance(step, FidelityBandStep):
+            out = step(out, state, obs, initial)
+    return out
