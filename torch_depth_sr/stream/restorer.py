@@ -105,7 +105,7 @@ class StreamResult(NamedTuple):
     the pixel had when it was last measured times ``hole_decay`` per frame since (0 on other holes). ``static``: the
     change test found nothing (all False on the first frame); ``evidence``: the trusted measurements behind each
     pixel after this frame. ``info["stream"]`` holds the frame's index in the stream and the shares of static pixels,
-    reused matches and holes filled from the past."""
+    reused matches, holes filled from the past and held outputs (``held``, :mod:`~torch_depth_sr.stream.post_hold`)."""
 
     depth: Any
     confidence: Any
