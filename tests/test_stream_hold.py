@@ -72,6 +72,28 @@ def test_a_change_below_the_change_test_still_reaches_the_output():
     assert abs(held[-1][left].mean() - every[-1][left].mean()) < 3.0
 
 
+def test_nothing_is_held_while_training():
+    """With a gradient tracked, every pixel gets the post-steps (a held output would carry none): the frame is what
+    the same stream makes without ``hold``, and the loss of a still pixel reaches the parameters."""
+    import copy
+
+    gt, rgb = _scene()
+    c = torch.from_numpy(rgb)[None]
+    frames = [torch.from_numpy(_noisy(gt, t).astype(np.float32))[None, None] for t in range(7)]
+    model = DepthRestorer.from_pretrained("denoise-fast", trainable=True)
+    held = StreamRestorer(model, {"max_frames": 3})
+    with torch.no_grad():
+        for f in frames[:6]:
+            r = held.step(f, c, return_details=True)
+    assert r.info["stream"]["held"] > 0.5  # without a gradient, held
+    every = copy.deepcopy(held)
+    every.settings = every.settings.replace(hold=None)
+    out = held(frames[6], c)
+    assert torch.equal(out, every(frames[6], c))
+    out[..., 5, 5].sum().backward()  # one still pixel of the left plane
+    assert any(float(p.grad.abs().sum()) > 0 for p in model.parameters() if p.grad is not None)
+
+
 def test_the_hold_setting_is_checked():
     from torch_depth_sr.config import RestorerConfig
 

@@ -423,7 +423,8 @@ class StreamConfig(Group):
     A static pixel whose run has its full mean keeps its previous output while the layers' value there stays within
     ``hold`` noise units (``join_cap``'s bounded unit) of the value that output was computed from: the post-steps (edge
     snap, edge refit, the refiner) act on the other pixels only, which on sensor input with flying pixels is most of
-    what a step saves (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere)."""
+    what a step saves (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere). Nothing is held
+    while a gradient is tracked (training)."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by

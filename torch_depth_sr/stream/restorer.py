@@ -262,10 +262,12 @@ class _Frame:
              initial: InitialEstimate) -> torch.Tensor:
         """The post-steps; with ``settings.hold`` on a warm frame a static pixel whose run has its full mean keeps its
         previous output while the layers' value ``x`` stays within ``hold`` units of the value that output came from
-        (:mod:`~torch_depth_sr.stream.post_hold`)."""
+        (:mod:`~torch_depth_sr.stream.post_hold`). Not while a gradient is tracked through ``x`` (training): every
+        pixel's loss then reaches the parameters."""
         self.layers_x = x.detach()
         st, hold = self.state, self.settings.hold
-        if hold is not None and self.warm and st.anchor is not None:
+        training = torch.is_grad_enabled() and x.requires_grad  # a held output would carry no gradient: none held
+        if hold is not None and self.warm and st.anchor is not None and not training:
             anchor = obs.normalise(st.anchor.to(x))
             self.steady = ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
             self.stats["held"] = float(self.steady.float().mean())
