@@ -29,6 +29,23 @@ def test_stream_row_times_its_step_against_a_cold_frame_in_turn():
     assert "paired" not in measure("fast", 24, 32, 1, repeats=1)
 
 
+def test_moving_stream_row_steps_through_the_sequences_and_pairs_cold_frames_on_them():
+    """``stream-fast-moving``: each call a new frame of the moving sequences (one per sample), the cold frames on the
+    frame the step took, the rmse against that frame's ground truth (not the static inputs')."""
+    from torch_depth_sr.evaluation import speed
+
+    step = speed._make_runner("stream-fast-moving", "cpu", frames=3)
+    y = torch.zeros(2, 1, 32, 40)
+    out0, _ = step(y, None)
+    first = step.frame[0].clone()
+    out1, info = step(y, None)
+    assert out1.shape == (2, 1, 32, 40) and not torch.equal(step.frame[0], first)  # the next frame
+    assert info["stream"]["frame"] == 1 and step.gt.shape == (2, 1, 32, 40)
+    row = measure("stream-fast-moving", 32, 40, 1, repeats=1)
+    assert row["paired"]["step"] > 0 and row["paired"]["cold"] > 0
+    assert 0 < row["rmse"] < 500  # mm against the sequence's own ground truth
+
+
 @pytest.mark.parametrize("method", ["bm-exact", "bm-refine", "x0-filter"])
 def test_measure_stage_rows(method):
     """The stage rows of the speed track (issue 13 item 5) run the model's own stage on its inputs."""

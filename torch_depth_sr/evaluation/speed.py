@@ -7,6 +7,9 @@ Times, side by side in one run and on the same synthetic inputs
   configuration's defaults (the default tier until 2026-12-04; ``full-fast`` is the former name of ``fast``), with
   the per-stage split the model reports in ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
   refiner, the rest = total − those) and the CG iterations of every layer;
+* ``stream``, ``stream-fast`` — a :class:`~torch_depth_sr.StreamRestorer` step on the inputs' static scene (new noise
+  each frame), and ``stream-fast-moving`` — a step on the stream track's moving sensor sequences (movers, flying
+  pixels: the edge steps run), each with its step ÷ a cold frame of the same model on the same frames;
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
 * ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
   reference every ratio is taken against (``ratio = method time / kornia-jbf9 time``, same size and
@@ -29,7 +32,8 @@ variables: ``sizes`` / ``TORCH_DEPTH_SR_SPEED_SIZES`` ("HxW,HxW", e.g. "48x64"),
 measurement, default True), ``threads`` / ``..._THREADS``, ``max_seconds`` (a method whose warm-up
 took longer than this is not repeated; its warm-up time is reported with ``repeats = 0``),
 ``skip`` ("method@HxWxB" entries not to run; default skips batch 8 at 1088×1376 for the model methods (``full``,
-``fast``, ``best``, ``full-fast``, ``stream``, ``stream-fast``) and ``dictionary``, too slow on a 2-core CPU).
+``fast``, ``best``, ``full-fast``, ``stream``, ``stream-fast``, ``stream-fast-moving``) and ``dictionary``, too slow on a
+2-core CPU).
 """
 from __future__ import annotations
 
@@ -43,6 +47,7 @@ import time
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import torch
 
 from ..errors import UsageError
@@ -60,8 +65,8 @@ __all__ = [
     "run_speed",
 ]
 
-METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fast", "bm-exact", "bm-refine",
-           "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
+METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fast", "stream-fast-moving", "bm-exact",
+           "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
 # the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best,
 # and "full", the frozen configuration's defaults (the default tier until 2026-12-04)
 MODEL_PRESETS = {"full": "full", "fast": "fast", "default": "default", "best": "best", "full-fast": "fast"}
@@ -79,7 +84,13 @@ STREAM_WARM_STEPS = 8
 # second of each timed (row["paired"]: the medians and the median of the rounds' ratios, the figure of issue 28's
 # step target). Three calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine
 # in two runs; timing the first call after the other kind made a 1376x1088 step 15 % slower than back to back.
-STREAM_MODELS = {"stream": "full", "stream-fast": "denoise-fast"}  # a preset or a shipped model (from_pretrained)
+STREAM_MODELS = {"stream": "full", "stream-fast": "denoise-fast",  # a preset or a shipped model (from_pretrained)
+                 "stream-fast-moving": "denoise-fast"}
+# "stream-fast-moving": the stream track's evaluated sequences (datasets.sequences.STREAM_SEQUENCES, then the tuning
+# ones, one per sample of the batch) at the row's size: movers, flying pixels, holes, the frames of a sensor. The static
+# rows' inputs have no flying pixels, so their frames skip the edge steps that a sensor's take, streamed or not
+# (docs/measurements/h100-2026-12-05). Each call is the next frame; its paired cold frames run on the frame its step
+# took, and its rmse is against that frame's ground truth.
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
 # "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240, the fast tier) once and reports its
@@ -87,7 +98,8 @@ STREAM_MODELS = {"stream": "full", "stream-fast": "denoise-fast"}  # a preset or
 SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size, VGA, Middlebury half size
 BATCHES = (1, 8)
 DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "default@1088x1376x8", "best@1088x1376x8",
-                "full-fast@1088x1376x8", "stream@1088x1376x8", "stream-fast@1088x1376x8", "dictionary@1088x1376x8")
+                "full-fast@1088x1376x8", "stream@1088x1376x8", "stream-fast@1088x1376x8",
+                "stream-fast-moving@1088x1376x8", "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "nonlocal", "cg")
 POST_STAGES = ("snap", "refine")  # the edge steps and the edge refiner (row["post_stages"])
 
@@ -130,12 +142,15 @@ def _model_runner(model):
     return run
 
 
-def _make_runner(method: str, device: str):
-    """A function ``(depth, rgb) -> (out, details or None)`` for ``method``."""
+def _make_runner(method: str, device: str, frames: int = 0):
+    """A function ``(depth, rgb) -> (out, details or None)`` for ``method`` (``frames``: how many calls a moving
+    stream's frames must cover)."""
     from .methods import DICTIONARY_PARAMS, JBF_PARAMS
 
     if method in MODEL_PRESETS:
         return _model_runner(named_model(MODEL_PRESETS[method]).to(device))
+    if method == "stream-fast-moving":
+        return _moving_stream_runner(device, frames)
     if method in STREAM_MODELS:
         from ..stream import StreamRestorer
 
@@ -168,6 +183,33 @@ def _make_runner(method: str, device: str):
 
         return lambda y, rgb: (kornia.filters.joint_bilateral_blur(y, rgb, (9, 9), 0.1, (3.0, 3.0)), None)
     raise ValueError(f"unknown speed method {method!r}; allowed are {list(METHODS)}.")
+
+
+def _moving_stream_runner(device: str, frames: int):
+    """``stream-fast-moving``: each call steps a :class:`~torch_depth_sr.StreamRestorer` of ``denoise-fast`` to the
+    next frame of the moving sequences (the inputs it is given only tell the size and batch); ``step.frame`` is the
+    frame it last took and ``step.gt`` its ground truth."""
+    from ..datasets.sequences import STREAM_SEQUENCES, TUNING_SEQUENCES, make_sequence
+    from ..stream import StreamRestorer
+
+    stream = StreamRestorer(named_model(STREAM_MODELS["stream-fast-moving"]).to(device))
+    specs = [*STREAM_SEQUENCES, *TUNING_SEQUENCES]
+    cache: dict = {}
+
+    def step(y, rgb):
+        if "depth" not in cache:
+            seqs = [make_sequence(specs[i % len(specs)], frames=max(frames, 2), height=y.shape[-2], width=y.shape[-1])
+                    for i in range(y.shape[0])]
+            cache.update({k: torch.from_numpy(np.stack([q[k] for q in seqs], 1).astype(np.float32)).to(y.device)
+                          for k in ("depth", "gt", "rgb")})
+            cache["t"] = 0
+        t = min(cache["t"], cache["depth"].shape[0] - 1)  # past the last frame: the last again (a still scene)
+        cache["t"] += 1
+        step.frame, step.gt = (cache["depth"][t], cache["rgb"][t]), cache["gt"][t]
+        r = stream.step(*step.frame, return_details=True, timings=True)
+        return r.depth, r.info
+
+    return step
 
 
 def _stage_runner(method: str):
@@ -257,7 +299,7 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
         torch.set_num_threads(int(threads))
     y, rgb, gt = make_inputs(height, width, batch)
     y, rgb = y.to(device), rgb.to(device)
-    run = _make_runner(method, device)
+    run = _make_runner(method, device, frames=1 + STREAM_WARM_STEPS + 3 * repeats)
     cuda = device.startswith("cuda")
     if cuda:
         torch.cuda.reset_peak_memory_stats()
@@ -273,7 +315,7 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
         warm = time.perf_counter() - t0
         n = repeats if warm <= max_seconds else 0
         warm_steps = []
-        for _ in range(STREAM_WARM_STEPS if method in ("stream", "stream-fast") and n else 0):
+        for _ in range(STREAM_WARM_STEPS if method in STREAM_MODELS and n else 0):
             t0 = time.perf_counter()
             run(y, rgb)
             _sync(device)
@@ -310,7 +352,8 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
         row["stages"] = {k: sec.get(k, 0.0) for k in (*STAGES, "rest", "total")}
         row["post_stages"] = {k: sec.get(k, 0.0) for k in POST_STAGES}
         row["cg_iterations"] = list(med["cg_iterations"])
-        row["rmse"] = float((out.float().cpu() - gt).pow(2).mean().sqrt())
+        truth = getattr(run, "gt", gt)  # a moving stream's: the frame it took
+        row["rmse"] = float((out.float().cpu() - truth.float().cpu()).pow(2).mean().sqrt())
     row["threads"] = torch.get_num_threads()
     row["loadavg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     return row
@@ -319,7 +362,9 @@ def measure(method: str, height: int, width: int, batch: int, device: str = "cpu
 def _paired_rounds(method: str, step, y: torch.Tensor, rgb: torch.Tensor, device: str, rounds: int) -> dict:
     """``rounds`` rounds of two stream steps then two cold frames of the same model (``STREAM_MODELS``), the second
     of each timed: ``{"step", "cold"}`` medians (s) and ``"ratio"``, the median of the rounds' step / cold."""
-    cold = _model_runner(named_model(STREAM_MODELS[method]).to(device))
+    model_run = _model_runner(named_model(STREAM_MODELS[method]).to(device))
+    # a moving stream's cold frames restore the frame its step last took; the others the row's inputs
+    cold = (lambda y, rgb: model_run(*step.frame)) if hasattr(step, "frame") else model_run
     cold(y, rgb)  # its warm-up
     _sync(device)
     steps, colds = [], []
