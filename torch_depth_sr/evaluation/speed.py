@@ -7,8 +7,8 @@ Times, side by side in one run and on the same synthetic inputs
   configuration's defaults (the default tier until 2026-12-04; ``full-fast`` is the former name of ``fast``), with
   the per-stage split the model reports in ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
   refiner, the rest = total − those) and the CG iterations of every layer;
-* ``stream``, ``stream-fast`` — a :class:`~torch_depth_sr.StreamRestorer` step on the inputs' static scene (new noise
-  each frame), and ``stream-fast-moving`` — a step on the stream track's moving sensor sequences (movers, flying
+* ``stream``, ``stream-fast``, ``stream-default`` — a :class:`~torch_depth_sr.StreamRestorer` step of ``full``,
+  ``denoise-fast`` and the ``default`` tier on the inputs' static scene (new noise each frame), and ``stream-fast-moving`` — a step on the stream track's moving sensor sequences (movers, flying
   pixels: the edge steps run), each with its step ÷ a cold frame of the same model on the same frames;
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
 * ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
@@ -32,8 +32,7 @@ variables: ``sizes`` / ``TORCH_DEPTH_SR_SPEED_SIZES`` ("HxW,HxW", e.g. "48x64"),
 measurement, default True), ``threads`` / ``..._THREADS``, ``max_seconds`` (a method whose warm-up
 took longer than this is not repeated; its warm-up time is reported with ``repeats = 0``),
 ``skip`` ("method@HxWxB" entries not to run; default skips batch 8 at 1088×1376 for the model methods (``full``,
-``fast``, ``best``, ``full-fast``, ``stream``, ``stream-fast``, ``stream-fast-moving``) and ``dictionary``, too slow on a
-2-core CPU).
+``fast``, ``best``, ``full-fast`` and the stream rows) and ``dictionary``, too slow on a 2-core CPU).
 """
 from __future__ import annotations
 
@@ -65,8 +64,8 @@ __all__ = [
     "run_speed",
 ]
 
-METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fast", "stream-fast-moving", "bm-exact",
-           "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
+METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fast", "stream-fast-moving", "stream-default",
+           "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
 # the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best,
 # and "full", the frozen configuration's defaults (the default tier until 2026-12-04)
 MODEL_PRESETS = {"full": "full", "fast": "fast", "default": "default", "best": "best", "full-fast": "fast"}
@@ -85,7 +84,7 @@ STREAM_WARM_STEPS = 8
 # step target). Three calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine
 # in two runs; timing the first call after the other kind made a 1376x1088 step 15 % slower than back to back.
 STREAM_MODELS = {"stream": "full", "stream-fast": "denoise-fast",  # a preset or a shipped model (from_pretrained)
-                 "stream-fast-moving": "denoise-fast"}
+                 "stream-fast-moving": "denoise-fast", "stream-default": "default"}
 # "stream-fast-moving": the stream track's evaluated sequences (datasets.sequences.STREAM_SEQUENCES, then the tuning
 # ones, one per sample of the batch) at the row's size: movers, flying pixels, holes, the frames of a sensor. The static
 # rows' inputs have no flying pixels, so their frames skip the edge steps that a sensor's take, streamed or not
@@ -99,7 +98,7 @@ SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size,
 BATCHES = (1, 8)
 DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "default@1088x1376x8", "best@1088x1376x8",
                 "full-fast@1088x1376x8", "stream@1088x1376x8", "stream-fast@1088x1376x8",
-                "stream-fast-moving@1088x1376x8", "dictionary@1088x1376x8")
+                "stream-fast-moving@1088x1376x8", "stream-default@1088x1376x8", "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "nonlocal", "cg")
 POST_STAGES = ("snap", "refine")  # the edge steps and the edge refiner (row["post_stages"])
 
