@@ -3,6 +3,9 @@
 # later layers on the whole frame off the CPU) in turn on the same machine: a stream step against a cold frame on
 # moving content (stream_moving.py, batch 1 and 4) and the speed track's stream-fast rows (a static scene), then the
 # stream track's synthetic part with this tree. Run from the repository root; kornia travels as wheels (.whl).
+# Before the device call, here: echo /.base/ >> .git/info/exclude; mkdir -p .base && git archive b984985
+# torch_depth_sr | tar -x -C .base; the wheels as in docs/measurements/h200-2026-12-04 (kornia 0.9.0, kornia_rs 0.2.0,
+# cp312 manylinux) into .whl; then run with carry [".whl", ".base"].
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
 export PYTHONUNBUFFERED=1
 OUT=${OUT:-out/gpu}
