@@ -25,6 +25,12 @@ __all__ = ["DenoiseRefineStep", "EdgeRefitStep", "EdgeSnapStep", "FidelityBandSt
            "UpsampleRefineStep", "post_steps"]
 
 
+def _edge_active(state: RestorationState) -> torch.Tensor:
+    """Where the edge steps act: the samples the singular gate found outliers in (``~state.clean``), less the pixels
+    a stream holds (``state.held``)."""
+    return ~state.clean if state.held is None else ~state.clean & ~state.held
+
+
 class EdgeSnapStep(nn.Module):
     """Flying pixels and edge blends go to their side (:func:`~torch_depth_sr.edge_snap.snap_to_sides`), on the
     samples the singular gate found outliers in (nothing without a guide). Built only where a gated singular test
@@ -41,7 +47,7 @@ class EdgeSnapStep(nn.Module):
         c = self.settings
         with stage(obs.log.timings, "snap", x.device):
             return snap_to_sides(x, obs.rgb, rounds=c.rounds, radius=c.radius, share=c.share,
-                                 sigma_color=c.sigma_color, sigma_space=c.sigma_space, active=~state.clean,
+                                 sigma_color=c.sigma_color, sigma_space=c.sigma_space, active=_edge_active(state),
                                  edge=c.edge)
 
     def extra_repr(self) -> str:
@@ -64,7 +70,7 @@ class EdgeRefitStep(nn.Module):
         c = self.settings
         with stage(obs.log.timings, "snap", x.device):
             return refit_to_measurements(x, obs.y, obs.observed, obs.rgb, radius=c.radius, band=c.band, edge=c.edge,
-                                         sigma_color=c.sigma_color, active=~state.clean)
+                                         sigma_color=c.sigma_color, active=_edge_active(state))
 
     def extra_repr(self) -> str:
         return ", ".join(f"{k}={v}" for k, v in self.settings.to_dict().items())

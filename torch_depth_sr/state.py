@@ -34,6 +34,9 @@ class RestorationState:
     # (B,1,1,1) bool: samples the last singular test's gate found free of singular pixels (None before a gated test);
     # the terms read it as a per-sample weight (CleanSamples), the edge steps act on the other samples
     clean: Optional[torch.Tensor] = None
+    # (B,1,H,W) bool: pixels whose output a stream holds from its previous frame (stream/post_hold.py); the edge steps
+    # do not compute them (None: none)
+    held: Optional[torch.Tensor] = None
 
 
 @dataclass

@@ -43,8 +43,7 @@ def run_post_steps(steps: nn.ModuleList, x: torch.Tensor, state: RestorationStat
         for step in steps:
             x = step(x, state, obs, initial)
         return x
-    # the edge steps act where the singular gate found outliers (``clean`` False): not on steady pixels
-    local = replace(state, clean=steady if state.clean is None else state.clean | steady)
+    local = replace(state, held=steady)  # the edge steps skip the steady pixels
     out = x
     for step in steps:
         if not isinstance(step, FidelityBandStep):

@@ -48,8 +48,8 @@ from ..state import RestorationState
 from ..terms import TemporalPriorTerm
 from .change import change_test, local_spread, remembered_spread
 from .crop_layers import run_later_layers
-from .post_hold import run_post_steps
 from .matching import StreamMatcher, dilate, search_radius
+from .post_hold import run_post_steps
 from .runs import grow_runs, join_runs
 
 __all__ = ["DEFAULT_STREAM_MODEL", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
@@ -325,7 +325,7 @@ class _Frame:
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed,
                                     match_weights=weights, policy=ScalePolicy(*(t.detach() for t in obs.policy)),
                                     static_share=self.stats.get("static", 1.0),
-                                    anchor=self._anchor(x, obs))
+                                    anchor=None if s.hold is None else self._anchor(x, obs))
 
 
 DEFAULT_STREAM_MODEL = "denoise-fast"
