@@ -178,8 +178,9 @@ class _Frame:
     def scale_policy(self, y: torch.Tensor, observed: torch.Tensor, noise_sigma: NoiseSigma) -> Optional[ScalePolicy]:
         """The previous frame's scale policy while at least half of that frame was static (``keep_scale``): a
         static scene's offset, scale and noise level stay what they were, and estimating them again cost about a tenth
-        of a step (docs/stream.md); else None, estimated again. A ``noise_sigma`` the caller gives sets σ in
-        :func:`~torch_depth_sr.observation.observe`: no estimate is made then."""
+        of a step (docs/measurements/issue28-stream/history.md, item 6); else None, estimated again. A
+        ``noise_sigma`` the caller gives sets σ in :func:`~torch_depth_sr.observation.observe`: no estimate is made
+        then."""
         st = self.state
         if (st is None or not self.settings.keep_scale or st.policy is None or st.static_share < 0.5
                 or st.policy.offset.shape[0] != y.shape[0]):

@@ -7,7 +7,8 @@ tolerance also hides a mover that advances by about a pixel a frame. The new val
 previous values a pixel behind, and the background it uncovers matches the background's previous values a pixel
 ahead. With a colour near the background's, nothing else sees such a mover. Its edge pixels then left their runs a
 frame late, every frame: held out as first departures, or dropped as outliers in time. The estimate lagged the mover,
-and the lag spread through the runs' means and the temporal prior (``docs/stream.md``).
+and the lag spread through the runs' means and the temporal prior
+(``docs/measurements/issue28-stream/history.md``, item 8).
 
 The window as a whole tells the two apart. A moved edge shifts the window's whole pattern, so one of the eight
 one-pixel shifts of the previous estimate matches the window much better than no shift does. A mixed or flying pixel
@@ -17,9 +18,10 @@ at an edge that stayed leaves the unshifted match good everywhere else in its wi
 and for which a one-pixel shift of that estimate brings the window's error below ``ratio`` times the unshifted
 error. Each pixel's error is ``|y − previous| / noise``, clipped at ``CLIP`` so that one flying pixel weighs no more
 than a departure. The window *departs* when one of its pixels is ``CLIP`` or more noise units off (a mean error above
-one unit instead, or at least 2, 3 or 5 such pixels, found fewer of the movers: ``docs/stream.md``). The previous
-estimate is replicated at the border. The shifted errors are summed only in the windows that depart, on the CPU by a
-numba kernel (:func:`~torch_depth_sr.stream.shift_kernel.shifted_windows_cpu`). Its float64 sums are taken in the
+one unit instead, or at least 2, 3 or 5 such pixels, found fewer of the movers:
+``docs/measurements/issue28-stream/history.md``, item 8). The previous estimate is replicated at the border. The
+shifted errors are summed only in the windows that depart, on the CPU by a numba kernel
+(:func:`~torch_depth_sr.stream.shift_kernel.shifted_windows_cpu`). Its float64 sums are taken in the
 torch path's order, so the results are the same bit for bit (tested).
 """
 from __future__ import annotations
