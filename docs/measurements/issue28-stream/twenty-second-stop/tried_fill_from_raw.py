@@ -11,7 +11,9 @@ with those measurements put back, and uses it where the variant says:
 * ``outliers@sensor-holes`` — the dropped outliers put back (as measured pixels), the estimate used at the sensor's
   own holes only (not at the dropped pixels);
 * ``outliers+departures@sensor-holes`` — both put back, the same pixels;
-* ``rim-outliers@sensor-holes`` — only the dropped outliers next to a sensor hole (3×3) put back.
+* ``rim-outliers@sensor-holes`` — only the dropped outliers next to a sensor hole (3×3) put back;
+* ``far-outliers@sensor-holes`` / ``near-outliers@sensor-holes`` — only the dropped outliers farther / nearer than the
+  previous estimate put back.
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/twenty-second-stop/tried_fill_from_raw.py --set evaluated
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/twenty-second-stop/tried_fill_from_raw.py --set fit
@@ -44,7 +46,8 @@ from torch_depth_sr.stream import StreamRestorer, default_stream_model  # noqa: 
 from torch_depth_sr.stream import restorer  # noqa: E402
 
 VARIANTS = ("shipped", "departures@holes", "departures@all", "outliers@sensor-holes",
-            "outliers+departures@sensor-holes", "rim-outliers@sensor-holes")
+            "outliers+departures@sensor-holes", "rim-outliers@sensor-holes", "far-outliers@sensor-holes",
+            "near-outliers@sensor-holes")
 SHIPPED_JOIN, SHIPPED_GUIDED = restorer.join_runs, initial._Initial.guided
 KEPT: dict = {}
 
@@ -71,6 +74,9 @@ def patch(variant: str) -> None:
     def guided(self, obs):
         est, confident = SHIPPED_GUIDED(self, obs)
         back = KEPT.pop("back", None)
+        if obs.temporal is not None and back is not None and put.startswith(("far", "near")):
+            farther = obs.normalise(obs.raw) > obs.temporal.target
+            back = back & (farther if put.startswith("far") else ~farther)
         if obs.temporal is None or back is None or not bool(back.any()):
             return est, confident
         y = torch.where(back, obs.normalise(obs.raw), obs.y)
