@@ -22,7 +22,8 @@ Only the convolutions run in bfloat16 (oneDNN accumulates each sum in float32); 
 coming out stay in the model's dtype, and everything else the model computes (block matching, the solves, the
 clamps that keep every output within the measurements around it) is untouched. At 640×480 on this project's 2-core
 Sapphire Rapids machine the ``best`` tier's 129k-parameter refiner takes about 0.1 s instead of 0.6 s; the held-out
-``paper`` and ``sensor`` figures of the three tiers change by less than 0.03 % (docs/speed.md, "Sixteenth stop").
+``paper`` and ``sensor`` figures of the three tiers change by less than 0.03 %
+(docs/measurements/issue27-tiers/history.md, "Sixteenth stop").
 """
 from __future__ import annotations
 
