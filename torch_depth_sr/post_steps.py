@@ -122,6 +122,8 @@ class UpsampleRefineStep(RefineStep):
 class FidelityBandStep(nn.Module):
     """Trusted measurements bound x on their own grid (:func:`~torch_depth_sr.fidelity.clamp_to_measurements`)."""
 
+    bounds_output = True  # a do-no-harm bound: it acts on the output as returned, held pixels included
+
     def __init__(self, settings: FidelityBand):
         super().__init__()
         self.settings = settings
@@ -138,6 +140,8 @@ class FidelityBandStep(nn.Module):
 class OutputHoldStep(nn.Module):
     """Do no harm on upsampling: the output held to x⁰ rebuilt with the white noise level
     (:func:`~torch_depth_sr.upsampling.hold_to_initial`)."""
+
+    bounds_output = True  # a do-no-harm bound, as FidelityBandStep
 
     def __init__(self, settings: OutputHold, upsampling: UpsamplingConfig):
         super().__init__()

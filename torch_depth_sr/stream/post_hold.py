@@ -7,8 +7,8 @@ static pixel whose run has its full mean (``fresh`` False: the pixels the later 
 :mod:`~torch_depth_sr.stream.crop_layers`) and whose layers' value stayed within ``StreamConfig.hold`` noise units of
 the value its previous output was computed from is *steady*: it keeps that output. The edge steps act on the other
 pixels only, which the CPU kernels compute alone. The refiner runs on the whole frame (a few convolutions) and is
-kept at those pixels only. The do-no-harm band (:class:`~torch_depth_sr.post_steps.FidelityBandStep`) then bounds the
-whole frame as in a cold one.
+kept at those pixels only. The do-no-harm bounds (the steps with ``bounds_output``: the band,
+:class:`~torch_depth_sr.post_steps.FidelityBandStep`) then bound the whole frame as in a cold one.
 
 The test is on the layers' value, not the change test alone: a change the change test misses still moves the layers'
 value towards the measurements, and the pixel gets the post-steps again once it has moved by ``hold`` units. Holding
@@ -27,7 +27,6 @@ from torch import nn
 
 from ..initial import InitialEstimate
 from ..observation import Observation
-from ..post_steps import FidelityBandStep
 from ..state import RestorationState
 
 __all__ = ["run_post_steps"]
@@ -46,10 +45,16 @@ def run_post_steps(steps: nn.ModuleList, x: torch.Tensor, state: RestorationStat
     local = replace(state, held=steady)  # the edge steps skip the steady pixels
     out = x
     for step in steps:
-        if not isinstance(step, FidelityBandStep):
+        if not _bounds(step):
             out = step(out, local, obs, initial)
     out = torch.where(steady, held.to(out), out)
     for step in steps:
-        if isinstance(step, FidelityBandStep):
+        if _bounds(step):
             out = step(out, state, obs, initial)
     return out
+
+
+def _bounds(step: nn.Module) -> bool:
+    """Whether ``step`` is a do-no-harm bound on the output (``bounds_output``): it runs after the held pixels are
+    pasted, on every pixel."""
+    return getattr(step, "bounds_output", False)
