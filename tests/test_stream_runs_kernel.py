@@ -32,7 +32,8 @@ def _inputs(shape, dtype, seed):
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("shape", [(1, 1, 1, 1), (1, 1, 3, 5), (2, 1, 37, 70)])
-@pytest.mark.parametrize("settings", [StreamConfig(), StreamConfig(outlier_test=None, weight=0.3, hole_decay=0.7)])
+@pytest.mark.parametrize("settings", [StreamConfig(), StreamConfig(outlier_test=None, weight=0.3, hole_decay=0.7),
+                                      StreamConfig(settled_frames=3)])
 def test_join_and_grow_kernels_equal_torch(monkeypatch, dtype, shape, settings):
     args = _inputs(shape, dtype, sum(shape))
     joined = runs.join_runs(*args, settings)
@@ -58,3 +59,15 @@ def test_join_and_grow_kernels_equal_torch(monkeypatch, dtype, shape, settings):
         for name in ("outlier", "held_out", "averaged", "restarted", "fresh"):
             flags = getattr(ref, name)
             assert bool(flags.any()) and not bool(flags.all()), name
+
+
+def test_a_run_is_fresh_until_it_is_settled():
+    """``fresh`` (the later layers run there, nothing is held): changed, or a static run younger than
+    ``settled_frames`` (``max_frames`` when None); with 1 only the changed pixels."""
+    args = _inputs((1, 1, 20, 30), torch.float32, 3)
+    static, age = args[2], args[8]
+    for settings, settled in ((StreamConfig(), 8), (StreamConfig(settled_frames=3), 3),
+                              (StreamConfig(settled_frames=1), 1)):
+        fresh = runs.join_runs(*args, settings).fresh
+        assert torch.equal(fresh, ~static | (age + 1 < settled))
+    assert torch.equal(runs.join_runs(*args, StreamConfig(settled_frames=1)).fresh, ~static)

@@ -424,7 +424,8 @@ class StreamConfig(Group):
     ``hold`` noise units (``join_cap``'s bounded unit) of the value that output was computed from: the post-steps (edge
     snap, edge refit, the refiner) act on the other pixels only, which on sensor input with flying pixels is most of
     what a step saves (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere). Nothing is held
-    while a gradient is tracked (training)."""
+    while a gradient is tracked (training). "Its full mean" is a static run of at least ``settled_frames`` frames (None:
+    ``max_frames``): where the later layers and the post-steps may leave a pixel to its past."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by
@@ -458,6 +459,11 @@ class StreamConfig(Group):
     # worse (docs/measurements/issue28-stream/twenty-first-stop/)
     hold: Optional[float] = 0.1
     layers: Optional[int] = None
+    # None (max_frames): 1 (every static pixel settled: later layers only where the scene changed) made a 640×480 step
+    # on moving sensor input 0.75 cold frames instead of 0.81 and the 45 synthetic fitting sequences better, but the
+    # 2006 streams (fitting split) 5 % worse on the mean of the four groups (4: 1.7 % worse; docs/measurements/
+    # issue28-stream/twenty-second-stop/)
+    settled_frames: Optional[float] = None
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
                                "hole_decay": real(0.0, 1.0, False), "fill_evidence": positive,
@@ -466,4 +472,8 @@ class StreamConfig(Group):
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
                                "keep_scale": boolean, "join_cap": optional(positive),
                                "shift_test": optional(real(0.0, 1.0)), "hold": optional(positive),
-                               "layers": optional(integer(1))}
+                               "layers": optional(integer(1)), "settled_frames": optional(positive)}
+
+    def settled_age(self) -> float:
+        """The age from which a static run is settled (not ``fresh``): ``settled_frames``, or ``max_frames``."""
+        return self.max_frames if self.settled_frames is None else self.settled_frames

@@ -42,7 +42,7 @@ class JoinedRuns(NamedTuple):
     restarted: torch.Tensor  # bool: a confirmed departure: a new run, no temporal pull this frame
     weight: torch.Tensor  # the temporal prior's weight
     departed: torch.Tensor  # the held-out or dropped measurement, for the next frame (0: none)
-    fresh: torch.Tensor  # bool: changed, or a run younger than max_frames (the later layers run here)
+    fresh: torch.Tensor  # bool: changed, or a run younger than settled_frames (the later layers run here)
 
 
 def join_runs(y: torch.Tensor, observed: torch.Tensor, static: torch.Tensor, candidate: torch.Tensor,
@@ -76,7 +76,7 @@ def join_runs(y: torch.Tensor, observed: torch.Tensor, static: torch.Tensor, can
     unmeasured = ~measured & (evidence < s.fill_evidence)
     aged = torch.where(unmeasured, age.clamp(max=s.unmeasured_frames), age)
     weight = torch.where(static & ~restarted, s.weight * aged, torch.zeros_like(evidence))
-    fresh = ~static | (age + 1 < s.max_frames)
+    fresh = ~static | (age + 1 < s.settled_age())
     return JoinedRuns(y, observed, outlier, held_out, averaged, restarted, weight, departed, fresh)
 
 

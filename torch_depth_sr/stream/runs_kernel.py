@@ -27,9 +27,10 @@ def _join(t0, t1, y, observed, static, candidate, noise, evidence, mean, departe
           y_out, observed_out, outlier_out, held_out, averaged_out, restarted_out, weight_out, departed_out,
           fresh_out):
     """Rows ``[t0, t1)`` of the ``B·H`` rows: :func:`~torch_depth_sr.stream.runs.join_runs`. ``c``: outlier_test
-    (inf: none), fill_evidence, unmeasured_frames, weight, max_frames, 0, 1 in the dtype."""
+    (inf: none), fill_evidence, unmeasured_frames, weight, the settled age (``StreamConfig.settled_age``), 0, 1 in the
+    dtype."""
     h, w = y.shape[1], y.shape[2]
-    limit_k, fill_ev, unmeasured_cap, weight_k, max_frames, zero, one = c[0], c[1], c[2], c[3], c[4], c[5], c[6]
+    limit_k, fill_ev, unmeasured_cap, weight_k, settled, zero, one = c[0], c[1], c[2], c[3], c[4], c[5], c[6]
     for t in range(t0, t1):
         b = t // h
         i = t - b * h
@@ -66,7 +67,7 @@ def _join(t0, t1, y, observed, static, candidate, noise, evidence, mean, departe
             held_out[b, i, j] = held
             averaged_out[b, i, j] = averaged
             restarted_out[b, i, j] = restarted
-            fresh_out[b, i, j] = (not st) or ag + one < max_frames
+            fresh_out[b, i, j] = (not st) or ag + one < settled
 
 
 def _planes(*tensors: torch.Tensor) -> list:
@@ -84,7 +85,7 @@ def join_runs_cpu(y: torch.Tensor, observed: torch.Tensor, static: torch.Tensor,
     o = np.ascontiguousarray(offset.detach().numpy(), dtype=dtype)
     sc = np.ascontiguousarray(scale.detach().numpy(), dtype=dtype)
     c = np.array([s.outlier_test if s.outlier_test else math.inf, s.fill_evidence, s.unmeasured_frames, s.weight,
-                  s.max_frames, 0.0, 1.0], dtype=dtype)
+                  s.settled_age(), 0.0, 1.0], dtype=dtype)
     floats = [np.empty((b, h, w), dtype=dtype) for _ in range(3)]  # y, observed, weight
     flags = [np.empty((b, h, w), dtype=np.bool_) for _ in range(4)]  # outlier, held out, averaged, restarted
     departed_out, fresh = np.empty((b, h, w), dtype=dtype), np.empty((b, h, w), dtype=np.bool_)
