@@ -166,13 +166,11 @@ def snap_to_sides(x: torch.Tensor, guide: torch.Tensor, rounds: int = 2, radius:
     b, _, h, w = x.shape
     for _ in range(int(rounds)):
         allowed, pixels = active, None
-        if edge is not None:  # near a depth edge only; on the CPU the other windows are not sorted at all
+        if edge is not None:  # near a depth edge only
             near = _near_edge(x, edge)
             allowed = near if active is None else near & active
-            if host_path(x.device):
-                pixels = _flat_pixels(allowed.expand(b, 1, h, w), h, w)
-        elif active is not None and active.shape[-2:] == (h, w) and host_path(x.device):
-            pixels = _flat_pixels(active.expand(b, 1, h, w), h, w)  # a per-pixel active: those windows only
+        if allowed is not None and allowed.shape[-2:] == (h, w) and host_path(x.device):
+            pixels = _flat_pixels(allowed.expand(b, 1, h, w), h, w)  # on the CPU the other windows are not sorted
         median, side_share = _sided_median(x, guide, int(radius), sigma_color, sigma_space, cutoff, pixels)
         move = side_share > share
         if allowed is not None:
