@@ -36,3 +36,22 @@ def test_distinct_equals_torch_unique(dtype):
         assert out.dtype == v.dtype and torch.equal(out, torch.unique(v))
     nan = torch.tensor([1.0, float("nan"), 1.0], dtype=dtype)
     assert distinct(nan).numel() == torch.unique(nan).numel()  # torch's path (numpy would merge the NaNs)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_lower_median_of_long_rows_equals_torch(dtype):
+    """Long rows take the bracketed selection: many ties (a still camera's colour changes), none, a bracket its
+    strided sample misses (every other value large), a constant row, a reduction over a middle dimension."""
+    g = torch.Generator().manual_seed(3)
+    n = 3 * 8192 + 5
+    ties = (torch.randint(-3, 4, (2, 3, n), generator=g) / 255).to(dtype)
+    ties[torch.rand(ties.shape, generator=g) < 0.9] = 0
+    plain = torch.randn(2, 3, n, generator=g, dtype=dtype)
+    fooled = torch.empty(1, n, dtype=dtype)
+    fooled[0, ::2] = 1000 + torch.arange(len(fooled[0, ::2]), dtype=dtype)
+    fooled[0, 1::2] = -torch.arange(len(fooled[0, 1::2]), dtype=dtype)
+    flat = torch.full((1, n), 2.5, dtype=dtype)
+    for v in (ties, plain, fooled, flat):
+        assert torch.equal(lower_median(v), v.median(-1).values)
+    assert torch.equal(lower_median(plain.transpose(1, 2), dim=1), plain.median(-1).values)
+    assert torch.equal(lower_median(plain[0, 0]), plain[0, 0].median())
