@@ -61,6 +61,10 @@ def crop_matches(m: BlockMatches, rows: slice, cols: slice, width: int, outside:
     """Matches of a crop with their flat indices in the crop's frame. A match outside the crop is ``"missing"``
     (index -1: re-matching replaces it) or its pixel's ``"own"`` index with no weight (for the layers, which read
     every index)."""
+    kernel = host_kernel("stream.matches_kernel", "crop_matches_cpu", m.weight)
+    if kernel is not None and m.index.dtype == torch.int64:
+        index, weight = kernel(m.index, m.weight, rows, cols, width, outside == "own")
+        return BlockMatches(m.dist[..., rows, cols], index, weight)
     index = m.index[..., rows, cols]
     # the row and column in int32 where the flat indices fit: int64 division took half of this function's time
     flat = index.to(torch.int32) if width * (m.index.shape[-2] + 1) < 2**31 else index
