@@ -698,3 +698,32 @@ def test_stream_track_seeds_run_the_recipes_on_other_scenes(tmp_path):
     got = json.loads(out.read_text())
     assert got["metadata"]["seeds"] == [7]
     assert sorted({r["sequence"] for r in got["results"]}) == sorted(s.name for s in specs)
+
+
+def test_the_singular_gate_also_reads_the_pixels_measured_in_the_frame_alone(monkeypatch):
+    """A stream frame's singular gate is given the pixels whose measurement is not a run's mean (``gate_region``):
+    a run's mean hides the past's flying pixels, and counted with the rest it diluted a mover's below the gate
+    (stages._gate; its own tests in test_singular_gate.py). A frame with no past has no region."""
+    import torch_depth_sr.stages as stages
+
+    seen = []
+    forward = stages.SingularDetector.forward
+
+    def spy(self, obs, x, matches):
+        seen.append(None if obs.gate_region is None else obs.gate_region.clone())
+        return forward(self, obs, x, matches)
+
+    monkeypatch.setattr(stages.SingularDetector, "forward", spy)
+    gt, rgb = _scene()
+    s = StreamRestorer(small_model())
+    s.step(_noisy(gt, 0), rgb.transpose(1, 2, 0))
+    assert seen and all(r is None for r in seen)
+    seen.clear()
+    moved = gt.copy()
+    moved[10:20, 5:15] = 700  # a near object arrives: measured afresh there
+    r = s.step(_noisy(moved, 1), rgb.transpose(1, 2, 0), return_details=True)
+    region = seen[0][0, 0]
+    assert all(torch.equal(g, seen[0]) for g in seen)  # x⁰'s test and every layer's
+    assert bool(region[12:18, 7:13].all())  # the arrival: this frame's own measurements
+    static = torch.from_numpy(np.asarray(r.static) > 0) & torch.from_numpy(_noisy(moved, 1) > 0)
+    assert float((~region & static).float().mean()) > 0.5  # most of the still scene is a run's mean

@@ -57,6 +57,9 @@ class Observation:
     supported: Optional[torch.Tensor] = None  # (B,1,h,w) bool: pixels the singular test always trusts
     guidance: Any = None  # the guidance network with this forward's colour features, or NoGuidance
     temporal: Any = None  # a stream's previous frame (stream.TemporalPrior: target, weight), None = none
+    # (B,1,h,w) bool: pixels whose share of gross failures the singular gate also reads on its own (a stream: those
+    # measured in this frame alone, not a run's mean); None: the gate reads the whole frame only
+    gate_region: Optional[torch.Tensor] = None
     percentiles: Optional[torch.Tensor] = None  # (B,2) p1 and p99 of the measured depth (the scale policy's)
 
     @property

@@ -156,11 +156,22 @@ def _as_tested(obs: Observation, q: torch.Tensor, conf: torch.Tensor, c: Singula
 def _gate(obs: Observation, q: torch.Tensor, conf: torch.Tensor, c: SingularConfig):
     """Gate per sample: gross failures (|y − μ| > 2σ_i, i.e. P < e⁻², at least 5 noise σ off) are practically
     impossible under Gaussian noise; if their share stays below the gate, the sample is taken to have no singular
-    pixels (the test's false alarms sit on true edges and cost accuracy): Q = measured, and ``clean`` says so."""
+    pixels (the test's false alarms sit on true edges and cost accuracy): Q = measured, and ``clean`` says so.
+
+    With ``obs.gate_region`` the share within that region must stay below the gate too, where the region holds at
+    least 1/gate measured pixels (fewer cannot tell a share below the gate from none). A stream's static pixels see
+    the mean of their run, which has already dropped or held out the past's singular readings: counted with the
+    others, they diluted the flying pixels at a mover's edges below the gate at 640×480 and switched the edge steps
+    off for the whole frame (docs/measurements/issue28-stream/twenty-third-stop/)."""
     ob = obs.observed.flatten(1)
     gross = (conf.flatten(1) < math.exp(-2.0)).to(ob.dtype) * ob
     share = gross.sum(1) / ob.sum(1).clamp_min(1)  # (B,)
-    clean = (share < c.gate).view(-1, 1, 1, 1)
+    clean = share < c.gate
+    if obs.gate_region is not None:
+        region = ob * obs.gate_region.flatten(1).to(ob.dtype)
+        n = region.sum(1)
+        clean = clean & ((n < 1.0 / c.gate) | ((gross * region).sum(1) / n.clamp_min(1) < c.gate))
+    clean = clean.view(-1, 1, 1, 1)
     return torch.where(clean, obs.observed.to(q.dtype), q), clean
 
 

@@ -219,7 +219,9 @@ class _Frame:
         self.stats["outliers_in_time"] = float(runs.outlier.float().mean())
         self.stats["held_out"] = float(runs.held_out.float().mean())
         glitches = obs.glitches | runs.outlier if bool(runs.outlier.any()) else obs.glitches
-        obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches)
+        # the singular gate also reads the pixels measured in this frame alone: the runs' means hide the past's
+        # flying pixels, and with them a mover's fell below the gate (stages._gate)
+        obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches, gate_region=~runs.averaged)
         self.departed = runs.departed.detach()
         self.static, self.warm, self.fresh = static, True, runs.fresh
         self.unit = joining
