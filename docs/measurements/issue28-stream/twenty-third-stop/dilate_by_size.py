@@ -5,8 +5,8 @@ the stream track's 120×160, on fitting scenes, each against frame-by-frame rest
         --values 2 4 8 [--set tuning+300] [--processes 2]
 
 ``--set tuning+300``: the three tuning sequences and the three recipes with seeds 300–303 (15 of the 45 fitting
-scenes; the evaluated sequences, seeds 1–3, are never loaded); ``--set evaluated``: the stream track's three sequences
-(reporting only). The stream model (``denoise-fast``) with each dilation, every other setting its own; per scene RMSE,
+scenes; the evaluated sequences, seeds 1–3, are never loaded); ``--set fresh``: seeds 200–205 (18 scenes never used to
+choose); ``--set evaluated``: the stream track's three sequences (reporting only). The stream model (``denoise-fast``) with each dilation, every other setting its own; per scene RMSE,
 flicker and trail divided by frame-by-frame restoration's (the stream track's scores), then the mean, the worst and
 the count of scenes that miss issue 28's targets (RMSE or trail above 1, flicker above 0.5).
 """
@@ -30,6 +30,7 @@ from torch_depth_sr.evaluation.stream import regions, synthetic_metrics  # noqa:
 from torch_depth_sr.stream import StreamRestorer, default_stream_model  # noqa: E402
 
 SETS = {"tuning+300": lambda: [*TUNING_SEQUENCES, *recipe_sequences(range(300, 304))],
+        "fresh": lambda: list(recipe_sequences(range(200, 206))),
         "evaluated": lambda: list(STREAM_SEQUENCES)}
 
 
