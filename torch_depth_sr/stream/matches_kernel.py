@@ -23,7 +23,7 @@ _MIN_ROWS = 64  # rows per task below which one thread does it
 @njit(cache=True, nogil=True)
 def _rows(t0, t1, index, weight, r0, c0, width, own, out_index, out_weight):
     """Rows ``[t0, t1)`` of the ``B·k·hc`` rows of the crop: each index moved to the crop's frame, or, outside the
-    crop, the pixel's own index with no weight (``own``) or -1 (the weight kept)."""
+    crop, the pixel's own index with no weight (``own``, which writes the weights) or -1."""
     k, hc, wc = out_index.shape[1], out_index.shape[2], out_index.shape[3]
     for t in range(t0, t1):
         plane = t // hc
@@ -35,16 +35,13 @@ def _rows(t0, t1, index, weight, r0, c0, width, own, out_index, out_weight):
             y = v // width
             x = v - y * width - c0
             y = y - r0
-            wt = weight[b, m, r0 + i, c0 + j]
-            if 0 <= y < hc and 0 <= x < wc:
+            inside = 0 <= y < hc and 0 <= x < wc
+            if inside:
                 out_index[b, m, i, j] = y * wc + x
-                out_weight[b, m, i, j] = wt
-            elif own:
-                out_index[b, m, i, j] = i * wc + j
-                out_weight[b, m, i, j] = 0.0
             else:
-                out_index[b, m, i, j] = -1
-                out_weight[b, m, i, j] = wt
+                out_index[b, m, i, j] = i * wc + j if own else -1
+            if own:  # else the weights are the crop's as they are (a view, no copy)
+                out_weight[b, m, i, j] = weight[b, m, r0 + i, c0 + j] if inside else 0.0
 
 
 def crop_matches_cpu(index: torch.Tensor, weight: torch.Tensor, rows: slice, cols: slice, width: int,
@@ -56,7 +53,7 @@ def crop_matches_cpu(index: torch.Tensor, weight: torch.Tensor, rows: slice, col
     idx = index.detach().numpy()
     wts = weight.detach().numpy()
     out_index = np.empty((b, k, hc, wc), dtype=idx.dtype)
-    out_weight = np.empty((b, k, hc, wc), dtype=wts.dtype)
+    out_weight = np.empty((b, k, hc, wc) if own else (1, 1, 1, 1), dtype=wts.dtype)
     run_range(_rows, b * k * hc, idx, wts, rows.start, cols.start, width, own, out_index, out_weight,
               min_share=_MIN_ROWS)
-    return torch.from_numpy(out_index), torch.from_numpy(out_weight)
+    return torch.from_numpy(out_index), torch.from_numpy(out_weight) if own else weight[..., rows, cols]
