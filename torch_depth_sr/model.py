@@ -35,7 +35,7 @@ from .initial import InitialEstimate, initial_stages
 from .layers import UnrolledLayer
 from .observation import Observation, observe
 from .operators import degradation_operator
-from .post_steps import post_steps
+from .post_steps import post_steps, run_steps
 from .refiner import EdgeRefiner
 from .stages import BlockMatcher, SingularDetector
 from .state import RestorationState
@@ -347,9 +347,7 @@ class _NoStream:
 
     def post(self, steps: nn.ModuleList, x: torch.Tensor, state: RestorationState, obs: Observation,
              initial: InitialEstimate) -> torch.Tensor:
-        for step in steps:
-            x = step(x, state, obs, initial)
-        return x
+        return run_steps(steps, x, state, obs, initial)
 
     def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
         pass

@@ -22,7 +22,7 @@ from .state import RestorationState, stage
 from .upsampling import hold_to_initial, upsampling_reference
 
 __all__ = ["DenoiseRefineStep", "EdgeRefitStep", "EdgeSnapStep", "FidelityBandStep", "OutputHoldStep", "RefineStep",
-           "UpsampleRefineStep", "post_steps"]
+           "UpsampleRefineStep", "post_steps", "run_steps"]
 
 
 def _edge_active(state: RestorationState) -> torch.Tensor:
@@ -160,6 +160,14 @@ class OutputHoldStep(nn.Module):
 
     def extra_repr(self) -> str:
         return ", ".join(f"{k}={v:g}" for k, v in self.settings.to_dict().items())
+
+
+def run_steps(steps: nn.ModuleList, x: torch.Tensor, state: RestorationState, obs: Observation,
+              initial: InitialEstimate) -> torch.Tensor:
+    """``steps`` in their order on the layers' value ``x``: what a frame on its own runs after its layers."""
+    for step in steps:
+        x = step(x, state, obs, initial)
+    return x
 
 
 def post_steps(config: RestorerConfig, refiner: EdgeRefiner | None) -> nn.ModuleDict:

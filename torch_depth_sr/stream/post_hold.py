@@ -27,6 +27,7 @@ from torch import nn
 
 from ..initial import InitialEstimate
 from ..observation import Observation
+from ..post_steps import run_steps
 from ..state import RestorationState
 
 __all__ = ["run_post_steps"]
@@ -39,9 +40,7 @@ def run_post_steps(steps: nn.ModuleList, x: torch.Tensor, state: RestorationStat
     (the previous output, normalised as ``x``) and the edge steps skip them; the band then everywhere. ``steady``
     None: every step everywhere, as in a cold frame."""
     if steady is None:
-        for step in steps:
-            x = step(x, state, obs, initial)
-        return x
+        return run_steps(steps, x, state, obs, initial)
     local = replace(state, held=steady)  # the edge steps skip the steady pixels
     out = x
     for step in steps:
