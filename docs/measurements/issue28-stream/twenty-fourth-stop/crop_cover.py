@@ -80,10 +80,11 @@ def main() -> None:
             stream.step(seq["depth"][t].astype(np.float32), seq["rgb"][t])
         layers, state, obs, fresh = caught["args"]
         pad = crop_layers.padding(obs, len(layers))
-        print(f"static-2movers 480x640, step 15: fresh {float(fresh.float().mean()):.3f} of the frame, padding {pad} px")
+        share = float(fresh.float().mean())
+        print(f"static-2movers 480x640, step 15: fresh {share:.3f} of the frame, padding {pad} px")
         print(f"{'cover':34s} {'boxes':>5s} {'area':>6s} {'later layers':>13s}")
-        for label, fixed in [("crops (shipped)", None), ("cost-aware, fixed 0 px", 0), ("cost-aware, fixed 6000 px", 6000),
-                             ("cost-aware, fixed 12000 px", 12000), ("cost-aware, fixed 40000 px", 40000)]:
+        covers = [("crops (shipped)", None)] + [(f"cost-aware, fixed {f} px", f) for f in (0, 6000, 12000, 40000)]
+        for label, fixed in covers:
             crop_layers.crops = shipped_crops if fixed is None else (lambda m, p, f=fixed: cover(m, p, f))
             boxes = crop_layers.crops(fresh, pad)
             share = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes) / fresh[0, 0].numel()

@@ -94,7 +94,8 @@ def main() -> None:
             flying, sided = _moved_pixels(depth, gated, forced, measured & (moved > 0.05))
             print(f"  {label:12s} {depth.shape[1]}x{depth.shape[0]} gross {min(shares):.3%}–{max(shares):.3%} ({clean})"
                   f"  forced not clean: {int((measured & (moved > 0.01)).sum())} px moved >1 %,"
-                  f" {int((measured & (moved > 0.05)).sum())} >5 % (of {int(measured.sum())}): {flying} of them flying-like,"
+                  f" {int((measured & (moved > 0.05)).sum())} >5 % (of {int(measured.sum())}):"
+                  f" {flying} of them flying-like,"
                   f" {sided} nearer a side forced than gated")
 
 
