@@ -527,12 +527,12 @@ def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_a
 
 
 def test_a_given_noise_level_makes_a_kept_scale_policy_estimate_nothing(monkeypatch):
-    import torch_depth_sr.stream.restorer as restorer
+    import torch_depth_sr.stream.frame as frame
 
     def refuse(*args, **kw):
         raise AssertionError("σ̂ estimated although the caller gave it")
 
-    monkeypatch.setattr(restorer, "sampled_noise_sigma", refuse)
+    monkeypatch.setattr(frame, "sampled_noise_sigma", refuse)
     gt, rgb = _scene()
     s = StreamRestorer(small_model(), noise_sigma=6.0)
     outs = [s.step(_noisy(gt, t), rgb, return_details=True) for t in range(3)]

@@ -1,37 +1,15 @@
 """:class:`StreamRestorer`: a depth video restored frame by frame with state carried from one frame to the next.
 
-What a frame leaves for the next (:class:`StreamState`): the restored depth; per pixel the *age* (frames of its
-static run), the *evidence* (trusted measurements of the run, decaying over holes), the mean of the run's
-measurements, whether the output had a value, the confidence, the local noise spread; the colour image and the last
-matches. The model's :meth:`~torch_depth_sr.DepthRestorer._run` calls the five hooks of :class:`_Frame`:
-
-1. ``observe`` — the change test (:func:`~torch_depth_sr.stream.change.change_test`) splits static from changed
-   pixels (a moving object, what it uncovers, a moved camera); outliers in time are dropped where the past was
-   measured; on static pixels ``y`` becomes the mean of the run's measurements (a measurement that left it is held
-   out); a dropped or held-out value that the next frame measures again starts a new run; the temporal prior
-   (``obs.temporal``: the previous estimate and the weight ``settings.weight × age`` on static pixels, read by
-   :class:`~torch_depth_sr.terms.TemporalPriorTerm` in every layer) and the matcher that keeps the previous matches
-   where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`);
-2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
-   confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
-   unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
-3. ``run_layers`` — the layers: with a previous frame and ``settings.layers = n``, the first ``n`` on the whole
-   frame and the others only where the scene changed or the static run is younger than ``max_frames``, on crops
-   around those pixels (:mod:`~torch_depth_sr.stream.crop_layers`; None, the default: every layer on the whole
-   frame);
-4. ``post`` — the post-steps, except on static pixels with a full run whose layers' value stayed within
-   ``settings.hold`` of the value their previous output came from: those keep that output
-   (:mod:`~torch_depth_sr.stream.post_hold`);
-5. ``keep`` — the state for the next frame.
-
-A frame with no state (the first after construction or :meth:`StreamRestorer.reset`) is the per-frame model's,
-bit for bit. The state is kept without gradient (truncated back-propagation through time: a training step's
-gradient flows through the current frame only). ``docs/stream.md`` has the measurements.
+Each frame runs the model's :meth:`~torch_depth_sr.DepthRestorer._run` with the hooks of
+:class:`~torch_depth_sr.stream.frame.StreamFrame` (the change test, the runs' means, the temporal prior, reused
+matches, the later layers on crops, held outputs) and keeps what it leaves for the next
+(:class:`~torch_depth_sr.stream.frame.StreamState`). :func:`with_stream` gives the model the stream's temporal prior
+term, sharing its parameters. ``docs/stream.md`` has the measurements.
 """
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass, fields, replace
+from dataclasses import fields
 from typing import Any, NamedTuple, Optional, Union
 
 import torch
@@ -39,62 +17,12 @@ from torch import nn
 
 from .._inputs import map_layout, parse_depth, restore_layout
 from ..config import StreamConfig
-from ..errors import ShapeError
-from ..initial import InitialEstimate
 from ..model import DepthRestorer, NoiseSigma, _check_fill, _check_model_input, _is_integer_dtype
-from ..noise import sampled_noise_sigma
-from ..observation import Observation, ScalePolicy
-from ..state import RestorationState
 from ..terms import TemporalPriorTerm
-from .change import change_test, local_spread, remembered_spread
-from .crop_layers import run_later_layers
-from .matching import StreamMatcher, dilate, search_radius
-from .post_hold import run_post_steps
-from .runs import grow_runs, join_runs
+from .frame import StreamFrame, StreamState, TemporalPrior
 
 __all__ = ["DEFAULT_STREAM_MODEL", "StreamRestorer", "StreamResult", "StreamState", "TemporalPrior",
            "default_stream_model", "with_stream"]
-
-
-SPREAD_MEMORY = 0.9  # the decay per frame of the remembered frame-to-frame change (the change test's noise unit)
-# the shift test's unit is at least this many of the change test's floors (2 σ̂, or 8 quantisation steps): with the
-# floor alone (a quarter of σ̂) a still RealSense scene's noise found shifts in a fifth of its windows. Of 1, 4, 8 and 16
-# floors, the lowest mean error on the 2006 streams with a mover (sensor), the synthetic fitting set alike for all
-# (docs/stream.md, item 8)
-SHIFT_FLOOR = 8.0
-
-
-class TemporalPrior(NamedTuple):
-    """What a stream frame knows of the previous one (``obs.temporal``), on the observation grid, in its units."""
-
-    target: torch.Tensor  # (B,1,H,W) the previous restored depth, normalised as this frame
-    weight: torch.Tensor  # (B,1,H,W) the prior's weight: settings.weight × age on static pixels, else 0
-    static: torch.Tensor  # (B,1,H,W) bool: the change test found nothing
-    evidence: torch.Tensor  # (B,1,H,W) the previous frame's evidence
-    averaged: torch.Tensor  # (B,1,H,W) bool: y is the mean of the static run's measurements here
-    restarted: torch.Tensor  # (B,1,H,W) bool: a static pixel whose measurement left the run's mean (a new mean)
-    seen: torch.Tensor  # (B,1,H,W) bool: the colour changed here (without colour: the change test)
-
-
-@dataclass
-class StreamState:
-    """What one frame leaves for the next (no gradient), in depth units."""
-
-    depth: torch.Tensor  # (B,1,H,W) the restored depth (every hole filled)
-    age: torch.Tensor  # (B,1,H,W) frames of the static run behind each pixel, at most max_frames
-    evidence: torch.Tensor  # (B,1,H,W) trusted measurements of the static run (decaying over holes)
-    mean: torch.Tensor  # (B,1,H,W) the mean of the run's measurements (0: none)
-    valid: torch.Tensor  # (B,1,H,W) bool: the output had a value (measured, or a confident fill)
-    hole: torch.Tensor  # (B,1,H,W) bool: not measured (or an outlier in time)
-    confidence: torch.Tensor  # (B,1,H,W) the model's confidence where measured, decayed on holes filled from the past
-    spread: torch.Tensor  # (B,1,H,W) local mean |y − x| of the measurements about the restored depth
-    rgb: Optional[torch.Tensor]  # (B,3,H,W) the colour image
-    matches: Optional[tuple[torch.Tensor, torch.Tensor]]  # the last layer's (dist, index), or None
-    departed: torch.Tensor  # (B,1,H,W) a measurement held out as the first departure from its run's mean (0: none)
-    match_weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None  # the matches' weights, the temperature
-    policy: Optional[ScalePolicy] = None  # the observation's scale policy (offset, scale, σ, grid step, percentiles)
-    static_share: float = 1.0  # the share of static pixels (1 on a first frame: it found nothing changed)
-    anchor: Optional[torch.Tensor] = None  # (B,1,H,W) the layers' value the output came from (settings.hold)
 
 
 class StreamResult(NamedTuple):
@@ -156,179 +84,6 @@ def _stream_settings(model: DepthRestorer, settings: Union[StreamConfig, dict, N
 
         raise ParameterError("settings", settings, "a StreamConfig, a dict of its fields or None")
     return settings
-
-
-class _Frame:
-    """The stream hooks of :meth:`DepthRestorer._run` for one frame: the previous frame into the observation and
-    the initial stage, this frame kept for the next (:attr:`kept`)."""
-
-    def __init__(self, settings: StreamConfig, state: Optional[StreamState], index: int = 0):
-        self.settings, self.state, self.index = settings, state, index
-        self.kept: Optional[StreamState] = None
-        self.valid: Optional[torch.Tensor] = None
-        self.stats: dict = {}
-        self.static: Optional[torch.Tensor] = None
-        self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
-        self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
-        self.warm = False  # this frame has the previous one's prior (observe found state on a denoising task)
-        self.layers_x: Optional[torch.Tensor] = None  # the layers' value, before the post-steps (post)
-        self.steady: Optional[torch.Tensor] = None  # the pixels whose previous output is held (post)
-        self.unit: Optional[torch.Tensor] = None  # the bounded noise unit of the runs (observe), normalised
-
-    def scale_policy(self, y: torch.Tensor, observed: torch.Tensor, noise_sigma: NoiseSigma) -> Optional[ScalePolicy]:
-        """The previous frame's scale policy while at least half of that frame was static (``keep_scale``): a
-        static scene's offset, scale and noise level stay what they were, and estimating them again cost about a tenth
-        of a step (docs/measurements/issue28-stream/history.md, item 6); else None, estimated again. A
-        ``noise_sigma`` the caller gives sets σ in :func:`~torch_depth_sr.observation.observe`: no estimate is made
-        then."""
-        st = self.state
-        if (st is None or not self.settings.keep_scale or st.policy is None or st.static_share < 0.5
-                or st.policy.offset.shape[0] != y.shape[0]):
-            return None
-        policy = ScalePolicy(*(t.to(device=y.device, dtype=y.dtype) for t in st.policy))
-        if noise_sigma is not None:
-            return policy
-        # the noise level: a running mean of estimates from a quarter of the rows each frame (the rows cycle)
-        sampled = sampled_noise_sigma(y, observed, 1 + self.index % 4)
-        sigma = torch.where(sampled > 0, 0.75 * policy.sigma + 0.25 * sampled, policy.sigma)
-        return policy._replace(sigma=torch.maximum(sigma, policy.step / 12**0.5))
-
-    def observe(self, obs: Observation) -> Observation:
-        s, st = self.settings, self.state
-        if st is None or obs.task != "denoise":
-            return obs
-        if st.depth.shape != obs.y.shape:
-            raise ShapeError(f"this frame is {tuple(obs.y.shape)} but the stream's previous frame was "
-                             f"{tuple(st.depth.shape)}; call reset() before a stream of another size or batch.",
-                             actual=tuple(obs.y.shape), expected=tuple(st.depth.shape))
-        dt = obs.y.dtype
-        target = obs.normalise(st.depth.to(dt))
-        scale = obs.scale.to(dt).view(-1, 1, 1, 1)
-        floor = torch.maximum(0.25 * obs.noise, obs.grid_step).to(dt).view(-1, 1, 1, 1)
-        noise = torch.maximum(st.spread.to(dt) / scale, floor)
-        # the run's mean and the shift test read a unit an edge cannot inflate without bound (join_cap)
-        joining = noise if s.join_cap is None else torch.minimum(noise, s.join_cap * floor)
-        test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s,
-                           shift_noise=torch.maximum(joining, SHIFT_FLOOR * floor))
-        static = ~test.changed
-        if test.own is not None:  # a hole has no depth to test: its own colour must not change
-            static = static & ~(test.own & (obs.observed <= 0))
-        evidence = st.evidence.to(dt)
-        runs = join_runs(obs.y, obs.observed, static, test.outlier, joining, evidence, st.mean.to(dt),
-                         st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
-        self.stats["outliers_in_time"] = float(runs.outlier.float().mean())
-        self.stats["held_out"] = float(runs.held_out.float().mean())
-        glitches = obs.glitches | runs.outlier if bool(runs.outlier.any()) else obs.glitches
-        # the singular gate also reads the pixels measured in this frame alone: the runs' means hide the past's
-        # flying pixels, and with them a mover's fell below the gate (stages._gate)
-        obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches, gate_region=~runs.averaged)
-        self.departed = runs.departed.detach()
-        self.static, self.warm, self.fresh = static, True, runs.fresh
-        self.unit = joining
-        obs = replace(obs, temporal=TemporalPrior(target, runs.weight, static, evidence, runs.averaged,
-                                                  runs.restarted, test.seen))
-        if s.reuse_matches and st.matches is not None:
-            fresh = dilate(test.changed, search_radius(obs.block_matcher.settings, obs.task))
-            obs = replace(obs, block_matcher=StreamMatcher(obs.block_matcher, st.matches, fresh, st.match_weights))
-            self.stats["reused_matches"] = float((~fresh).float().mean())
-        return obs
-
-    def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
-        initial = init(obs)
-        prior = obs.temporal
-        hole = obs.observed <= 0
-        if prior is None:
-            self.valid = ~hole | (initial.fill_confident > 0)
-            return initial
-        # a hole the past measured confidently is filled from the past; a hole that was one in the previous frame
-        # too keeps that frame's verdict (filled, or left missing with fill="trusted") unless its colour changed: no
-        # pixel toggles between filled and missing on noise; any other hole gets the frame's own verdict
-        past = self._from_past(obs)
-        held = hole & self.state.hole.to(hole.device) & ~prior.seen
-        confident = torch.where(past, torch.ones_like(initial.fill_confident),
-                                torch.where(held, self.state.valid.to(initial.fill_confident), initial.fill_confident))
-        self.valid = ~hole | (confident > 0)
-        return initial._replace(fill_confident=confident)
-
-    def run_layers(self, layers: nn.ModuleList, state: RestorationState, obs: Observation) -> RestorationState:
-        n = self.settings.layers
-        first = layers if not self.warm or n is None else layers[:n]
-        for layer in first:
-            state = layer(state, obs)
-        if len(first) < len(layers):
-            # the rest of the layers where the scene changed or the static run has not yet its full mean
-            # (max_frames measurements): on crops around those pixels (crop_layers)
-            state = run_later_layers(layers[len(first):], state, obs, self.fresh)
-        return state
-
-    def post(self, steps: nn.ModuleList, x: torch.Tensor, state: RestorationState, obs: Observation,
-             initial: InitialEstimate) -> torch.Tensor:
-        """The post-steps; with ``settings.hold`` on a warm frame a static pixel whose run has its full mean keeps its
-        previous output while the layers' value ``x`` stays within ``hold`` units of the value that output came from
-        (:mod:`~torch_depth_sr.stream.post_hold`). Not while a gradient is tracked through ``x`` (training): every
-        pixel's loss then reaches the parameters."""
-        self.layers_x = x.detach()
-        st, hold = self.state, self.settings.hold
-        training = torch.is_grad_enabled() and x.requires_grad  # a held output would carry no gradient: none held
-        if hold is not None and self.warm and st.anchor is not None and not training:
-            anchor = obs.normalise(st.anchor.to(x))
-            self.steady = ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
-            self.stats["held"] = float(self.steady.float().mean())
-        return run_post_steps(steps, x, state, obs, initial, self.steady,
-                              None if self.steady is None else obs.temporal.target)
-
-    def _anchor(self, x: torch.Tensor, obs: Observation) -> torch.Tensor:
-        """(B,1,H,W) depth units: the layers' value each output was computed from (kept where the output was held)."""
-        now = obs.denormalise(self.layers_x.to(x))
-        return now if self.steady is None else torch.where(self.steady, self.state.anchor.to(x), now)
-
-    def _from_past(self, obs: Observation) -> torch.Tensor:
-        """Holes the past measured confidently: static, with evidence of at least ``fill_evidence``."""
-        prior = obs.temporal
-        return (obs.observed <= 0) & prior.static & (prior.evidence >= self.settings.fill_evidence)
-
-    def keep(self, x: torch.Tensor, state: Any, obs: Observation, initial: InitialEstimate) -> None:
-        s = self.settings
-        if obs.task != "denoise":
-            self.kept = None
-            return
-        with torch.no_grad():
-            x = x.detach()
-            measured = obs.observed > 0
-            trusted = measured & (state.q.detach() > 0)
-            conf = (state.confidence.detach() * obs.observed).to(x.dtype)
-            prior = obs.temporal
-            if prior is None:
-                one = trusted.to(x.dtype)
-                ymean = torch.where(measured, obs.denormalise(obs.y.detach()), torch.zeros_like(x))
-                age, evidence, confidence, mean = torch.ones_like(one), one, conf, ymean
-            else:
-                st = self.state
-                runs = grow_runs(obs.y.detach().to(x.dtype), obs.observed.to(x.dtype), trusted, conf, prior.static,
-                                 prior.restarted, prior.evidence.to(x.dtype), st.age.to(x.dtype),
-                                 st.confidence.to(x.dtype), st.mean.to(x.dtype), obs.offset, obs.scale, s)
-                age, evidence, confidence, mean = runs.age, runs.evidence, runs.confidence, runs.mean
-                self.stats["filled_from_past"], self.stats["static"] = runs.filled_from_past, runs.static
-            matches = weights = None
-            if state.matches is not None:
-                matches = (state.matches.dist.detach(), state.matches.index.detach())
-                weights = (state.matches.weight.detach(), obs.block_matcher.temperature.detach().clone())
-            rgb = None if obs.rgb is None else obs.rgb.detach()
-            # the noise unit of the next change test: the local spread of the measurements about this estimate, and
-            # where the scene stayed, of their change since the previous estimate (a sensor whose depth steps
-            # between levels, far away, moves more from frame to frame than about any one estimate), remembered
-            # with a decay of SPREAD_MEMORY per frame
-            if prior is None:
-                spread = local_spread(obs.raw, obs.observed, x, 2 * s.window + 1)
-            else:
-                spread = remembered_spread(obs.raw, obs.observed, x, self.state.depth.to(x), self.state.spread.to(x),
-                                           prior.static, 2 * s.window + 1, SPREAD_MEMORY)
-            self.kept = StreamState(depth=x, age=age, evidence=evidence, mean=mean, valid=self.valid, hole=~measured,
-                                    confidence=confidence, spread=spread, rgb=rgb, matches=matches,
-                                    departed=torch.zeros_like(x) if self.departed is None else self.departed,
-                                    match_weights=weights, policy=ScalePolicy(*(t.detach() for t in obs.policy)),
-                                    static_share=self.stats.get("static", 1.0),
-                                    anchor=None if s.hold is None else self._anchor(x, obs))
 
 
 DEFAULT_STREAM_MODEL = "denoise-fast"
@@ -442,7 +197,7 @@ class StreamRestorer(nn.Module):
         return out.depth.to(device=depth.device, dtype=depth.dtype)
 
     def _step(self, y, observed, rgb, noise_sigma, scale_factor, fill, timed, integer_input):
-        frame = _Frame(self.settings, self.state, self.frames)
+        frame = StreamFrame(self.settings, self.state, self.frames)
         sigma = self.noise_sigma if noise_sigma is None else noise_sigma
         out = self.model._run(y, observed, rgb, sigma, scale_factor, fill, timed=timed, integer_input=integer_input,
                               stream=frame)
@@ -451,7 +206,7 @@ class StreamRestorer(nn.Module):
         self.frames += 1
         return out, frame
 
-    def _maps(self, out, frame: _Frame) -> dict:
+    def _maps(self, out, frame: StreamFrame) -> dict:
         kept = frame.kept
         conf = out.confidence if kept is None else kept.confidence.to(out.confidence)
         static = torch.zeros_like(out.trusted, dtype=torch.bool) if frame.static is None else frame.static

@@ -1,6 +1,6 @@
 """The static runs of a stream frame: what the change test's verdicts make of each pixel's measurement and state.
 
-Two per-pixel updates, one on each side of the model (:class:`~torch_depth_sr.stream.restorer.StreamRestorer`):
+Two per-pixel updates, one on each side of the model (:class:`~torch_depth_sr.stream.frame.StreamFrame`):
 
 * :func:`join_runs` (before the model) — the measurement of a static pixel joins the mean of its run, and the model
   sees the mean (every stage that reads y, the data term and the do-no-harm band included). A measurement that

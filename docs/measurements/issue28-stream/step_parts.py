@@ -17,29 +17,29 @@ import torch_depth_sr.initial as initial
 import torch_depth_sr.model as model
 import torch_depth_sr.post_steps as post
 import torch_depth_sr.stream.change as change
-import torch_depth_sr.stream.restorer as restorer
+import torch_depth_sr.stream.frame as frame
 from torch_depth_sr.evaluation.speed import _make_runner, make_inputs
 
 PARTS = [  # (module or class, function, label)
     (model, "observe", "observation (scale, noise)"),
-    (restorer._Frame, "observe", "stream: change test and runs"),
-    (restorer, "change_test", "  change test"),
+    (frame.StreamFrame, "observe", "stream: change test and runs"),
+    (frame, "change_test", "  change test"),
     (change, "_nearest_distance", "    nearest previous value"),
     (change, "depth_votes", "    depth votes"),
     (change, "colour_changes", "    colour change"),
     (change, "camera_moved", "    camera test"),
     (change, "dilate", "    dilations"),
-    (restorer, "join_runs", "  runs joined"),
-    (restorer._Frame, "initial", "x⁰"),
+    (frame, "join_runs", "  runs joined"),
+    (frame.StreamFrame, "initial", "x⁰"),
     (initial.DenoiseInit, "guided", "  colour-guided fill"),
     (initial, "domain_transform_filter", "    domain transform"),
     (initial, "fill_holes_sided", "    sided fill"),
     (initial, "_alpha", "  α⁰"),
-    (restorer._Frame, "run_layers", "layers"),
+    (frame.StreamFrame, "run_layers", "layers"),
     (post.RefineStep, "forward", "edge refiner"),
-    (restorer._Frame, "keep", "stream: state kept"),
-    (restorer, "remembered_spread", "  noise unit"),
-    (restorer, "grow_runs", "  runs grown"),
+    (frame.StreamFrame, "keep", "stream: state kept"),
+    (frame, "remembered_spread", "  noise unit"),
+    (frame, "grow_runs", "  runs grown"),
 ]
 
 

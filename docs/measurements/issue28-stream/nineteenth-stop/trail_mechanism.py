@@ -22,7 +22,7 @@ import torch
 from torch_depth_sr import restore_depth
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
-from torch_depth_sr.stream import restorer as stream_restorer
+from torch_depth_sr.stream import frame as stream_frame
 
 
 def main() -> None:
@@ -35,7 +35,7 @@ def main() -> None:
     a = p.parse_args()
     torch.set_num_threads(1)
     seen: dict = {}
-    change_test, join_runs = stream_restorer.change_test, stream_restorer.join_runs
+    change_test, join_runs = stream_frame.change_test, stream_frame.join_runs
 
     def recorded_change_test(y, observed, target, noise, *args):
         out = change_test(y, observed, target, noise, *args)
@@ -47,7 +47,7 @@ def main() -> None:
         seen.update(runs=out, offset=args[-3], scale=args[-2])
         return out
 
-    stream_restorer.change_test, stream_restorer.join_runs = recorded_change_test, recorded_join_runs
+    stream_frame.change_test, stream_frame.join_runs = recorded_change_test, recorded_join_runs
     spec = replace(STREAM_SEQUENCES[0], name=f"static-2movers@{a.seed}", seed=a.seed)
     seq = make_sequence(spec, frames=a.frame + 1, height=120, width=160)
     model = default_stream_model()

@@ -24,7 +24,7 @@ from torch_depth_sr import restore_depth
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics
 from torch_depth_sr.stream import StreamRestorer, change, default_stream_model
-from torch_depth_sr.stream import restorer as stream_restorer
+from torch_depth_sr.stream import frame as stream_frame
 
 from fresh_seeds import restored_frames  # this folder's script (its folder is on the path)
 
@@ -79,13 +79,13 @@ def main() -> None:
         base = synthetic_metrics(restored_frames(lambda d, c: restore_depth(d, c, model=model), seq), seq, reg)
         cells = []
         for name in rows:
-            shipped = stream_restorer.local_spread, stream_restorer.remembered_spread
+            shipped = stream_frame.local_spread, stream_frame.remembered_spread
             if name == a.unit:
-                stream_restorer.local_spread, stream_restorer.remembered_spread = local_spread, remembered_spread
+                stream_frame.local_spread, stream_frame.remembered_spread = local_spread, remembered_spread
             try:
                 m = synthetic_metrics(restored_frames(StreamRestorer(model).step, seq), seq, reg)
             finally:
-                stream_restorer.local_spread, stream_restorer.remembered_spread = shipped
+                stream_frame.local_spread, stream_frame.remembered_spread = shipped
             r = [m[k] / base[k] for k in KEYS]
             rows[name].append(r)
             cells.append(f"{name}: " + " ".join(f"{k} {v:.4f}" for k, v in zip(KEYS, r)))

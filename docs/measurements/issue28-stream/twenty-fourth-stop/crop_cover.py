@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 import torch_depth_sr.stream.crop_layers as crop_layers
-import torch_depth_sr.stream.restorer as restorer
+import torch_depth_sr.stream.frame as frame
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
@@ -67,14 +67,14 @@ def main() -> None:
     spec = next(s for s in STREAM_SEQUENCES if s.name == "static-2movers")
     seq = make_sequence(spec, frames=16, height=480, width=640)
     stream = StreamRestorer(default_stream_model().eval())
-    shipped_later, shipped_crops = restorer.run_later_layers, crop_layers.crops
+    shipped_later, shipped_crops = frame.run_later_layers, crop_layers.crops
     caught = {}
 
     def catch(layers, state, obs, fresh):
         caught["args"] = (layers, state, obs, fresh)
         return shipped_later(layers, state, obs, fresh)
 
-    restorer.run_later_layers = catch
+    frame.run_later_layers = catch
     with torch.no_grad():
         for t in range(16):
             stream.step(seq["depth"][t].astype(np.float32), seq["rgb"][t])
@@ -101,7 +101,7 @@ def main() -> None:
             crop_layers.run_later_layers(layers, state, obs, torch.ones_like(fresh))
             times.append(time.perf_counter() - t0)
         print(f"{'whole frame':34s} {1:5d} {1.0:6.2f} {np.median(times) * 1e3:10.1f} ms")
-    restorer.run_later_layers = shipped_later
+    frame.run_later_layers = shipped_later
     gt = seq["gt"][:, 0].astype(np.float64)
     for label, fixed in [("crops (shipped)", None), ("cost-aware, fixed 6000 px", 6000),
                          ("cost-aware, fixed 12000 px", 12000)]:

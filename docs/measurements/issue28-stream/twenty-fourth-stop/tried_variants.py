@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "nineteenth-stop"))
 from fresh_seeds import KEYS, LIMITS, restored_frames  # noqa: E402  (the nineteenth stop's script)
 
 import torch_depth_sr.stream.crop_layers as crop_layers  # noqa: E402
-import torch_depth_sr.stream.restorer as restorer  # noqa: E402
+import torch_depth_sr.stream.frame as frame  # noqa: E402
 from torch_depth_sr import restore_depth  # noqa: E402
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences  # noqa: E402
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics  # noqa: E402
@@ -39,7 +39,7 @@ from torch_depth_sr.stream.runs import JoinedRuns  # noqa: E402
 
 SETS = {"tuning": lambda: list(TUNING_SEQUENCES),
         "fit": lambda: [*TUNING_SEQUENCES, *recipe_sequences(range(300, 304)), *recipe_sequences(range(400, 410))]}
-SHIPPED = (crop_layers.host_path, restorer.join_runs)
+SHIPPED = (crop_layers.host_path, frame.join_runs)
 
 
 def near_join(radius, y, observed, static, candidate, noise, evidence, mean, departed, age, offset, scale, s):
@@ -78,15 +78,15 @@ def unpulled_join(radius, *args):
 
 
 def use(variant: str) -> None:
-    crop_layers.host_path, restorer.join_runs = SHIPPED
+    crop_layers.host_path, frame.join_runs = SHIPPED
     if variant == "whole":
         crop_layers.host_path = lambda device: False  # the device path: no crops
     elif variant.startswith("unpulled"):
         radius = int(variant[8:])
-        restorer.join_runs = lambda *a: unpulled_join(radius, *a)
+        frame.join_runs = lambda *a: unpulled_join(radius, *a)
     elif variant.startswith("near"):
         radius = int(variant[4:])
-        restorer.join_runs = lambda *a: near_join(radius, *a)
+        frame.join_runs = lambda *a: near_join(radius, *a)
     elif variant != "shipped":
         raise SystemExit(f"unknown variant {variant!r}: shipped, whole, nearR or unpulledR (R in px)")
 

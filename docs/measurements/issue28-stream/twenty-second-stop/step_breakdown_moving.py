@@ -19,7 +19,7 @@ import torch
 import torch_depth_sr.model as model_module
 import torch_depth_sr.post_steps as post_steps
 import torch_depth_sr.stream.crop_layers as crop_layers
-import torch_depth_sr.stream.restorer as restorer
+import torch_depth_sr.stream.frame as frame
 from torch_depth_sr import restore_depth
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
@@ -49,10 +49,10 @@ def main() -> None:
     h, w = (int(t) for t in a.size.split("x"))
     timed(model_module, "observe", "observation (step and cold)")
     for n in ["observe", "initial", "run_layers", "post", "keep"]:
-        timed(restorer._Frame, n, "stream." + n)
+        timed(frame.StreamFrame, n, "stream." + n)
     for n in ["change_test", "join_runs", "grow_runs", "remembered_spread"]:
-        timed(restorer, n, "· " + n)
-    later = restorer.run_later_layers
+        timed(frame, n, "· " + n)
+    later = frame.run_later_layers
 
     def later_layers(layers, state, obs, changed):
         boxes = crops(changed, crop_layers.padding(obs, len(layers)))
@@ -63,7 +63,7 @@ def main() -> None:
         TIMES["· later layers (crops)"].append(time.perf_counter() - t0)
         return out
 
-    restorer.run_later_layers = later_layers
+    frame.run_later_layers = later_layers
     for cls in [post_steps.EdgeSnapStep, post_steps.EdgeRefitStep, post_steps.DenoiseRefineStep,
                 post_steps.FidelityBandStep]:
         timed(cls, "forward", cls.__name__ + " (step and cold)")

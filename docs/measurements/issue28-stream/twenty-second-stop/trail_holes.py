@@ -9,7 +9,7 @@ mover in three frames, with their row of raw depth.
 import sys, numpy as np, torch
 from torch_depth_sr import StreamRestorer, restore_depth
 from torch_depth_sr.stream import default_stream_model
-from torch_depth_sr.stream import restorer as R
+from torch_depth_sr.stream import frame as R
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.evaluation.stream import _dilate, regions
 torch.set_num_threads(1)

@@ -43,17 +43,17 @@ from torch_depth_sr import initial, restore_depth  # noqa: E402
 from torch_depth_sr.datasets.sequences import make_sequence  # noqa: E402
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics  # noqa: E402
 from torch_depth_sr.stream import StreamRestorer, default_stream_model  # noqa: E402
-from torch_depth_sr.stream import restorer  # noqa: E402
+from torch_depth_sr.stream import frame  # noqa: E402
 
 VARIANTS = ("shipped", "departures@holes", "departures@all", "outliers@sensor-holes",
             "outliers+departures@sensor-holes", "rim-outliers@sensor-holes", "far-outliers@sensor-holes",
             "near-outliers@sensor-holes")
-SHIPPED_JOIN, SHIPPED_GUIDED = restorer.join_runs, initial._Initial.guided
+SHIPPED_JOIN, SHIPPED_GUIDED = frame.join_runs, initial._Initial.guided
 KEPT: dict = {}
 
 
 def patch(variant: str) -> None:
-    restorer.join_runs, initial._Initial.guided = SHIPPED_JOIN, SHIPPED_GUIDED
+    frame.join_runs, initial._Initial.guided = SHIPPED_JOIN, SHIPPED_GUIDED
     if variant == "shipped":
         return
     put, where = variant.split("@")
@@ -87,7 +87,7 @@ def patch(variant: str) -> None:
         at = KEPT["sensor_hole"] if where == "sensor-holes" else obs.observed <= 0
         return torch.where(at, est_b, est), torch.where(at, confident_b, confident)
 
-    restorer.join_runs, initial._Initial.guided = join_runs, guided
+    frame.join_runs, initial._Initial.guided = join_runs, guided
 
 
 def scene(spec) -> tuple[str, list, list]:
