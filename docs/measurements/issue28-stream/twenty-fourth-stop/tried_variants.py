@@ -1,18 +1,26 @@
-"""Issue 28, twenty-fourth stop: two variants of the stream tried against the trails, each as a patch of this process
-(nothing here is shipped), on fitting scenes, each scene against frame-by-frame restoration.
+"""Issue 28, twenty-fourth stop: variants of the stream tried against the trails and the holes' fill, each as a patch
+of this process (nothing here is shipped), on fitting scenes, each scene against frame-by-frame restoration.
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/twenty-fourth-stop/tried_variants.py --set tuning \
         --size 480x640 --variants shipped whole near4 near8
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/twenty-fourth-stop/tried_variants.py --set fit \
         --size 120x160 --variants shipped near4 near8
 
-Variants: ``shipped`` — the stream as it is; ``whole`` — the later layers on the whole frame instead of crops around
-the fresh pixels (the values pasted at the same pixels: are the crops' own CG step sizes behind the longer trails at
-480×640?); ``nearR`` — no measurement is held out as a first departure from its run within R px of a changed pixel
-(:func:`~torch_depth_sr.stream.runs.join_runs`' torch path with that one condition added: at a mover's edge a
-background measurement was held out for a frame, traced on seed 204 at the twenty-third stop). ``--set``: ``tuning``
-(the three tuning sequences) or ``fit`` (the 45 fitting scenes of ``setting_synthetic.py``). Per scene RMSE, flicker
-and trail divided by frame-by-frame restoration's, then the mean and the count of scenes missing issue 28's targets.
+Variants:
+
+* ``shipped`` — the stream as it is;
+* ``whole`` — the later layers on the whole frame instead of crops around the fresh pixels (the values pasted at the
+  same pixels: are the crops' own CG step sizes behind the longer trails at 480×640?);
+* ``nearR`` — no measurement is held out as a first departure from its run within R px of a changed pixel
+  (:func:`~torch_depth_sr.stream.runs.join_runs`' torch path with that one condition added: at a mover's edge a
+  background measurement was held out for a frame, traced on seed 204 at the twenty-third stop);
+* ``unpulledR`` — no temporal prior within R px of a changed pixel;
+* ``fill:V`` — the twenty-second stop's variant ``V`` of x⁰'s fill (``tried_fill_from_raw.py``: the fill fed the
+  readings the stream holds out or drops), run here at another size.
+
+``--set``: ``tuning`` (the three tuning sequences) or ``fit`` (the 45 fitting scenes of ``setting_synthetic.py``). Per
+scene RMSE, flicker and trail divided by frame-by-frame restoration's, then the mean and the count of scenes missing
+issue 28's targets.
 """
 from __future__ import annotations
 
@@ -26,7 +34,10 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "nineteenth-stop"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "twenty-second-stop"))
 from fresh_seeds import KEYS, LIMITS, restored_frames  # noqa: E402  (the nineteenth stop's script)
+from tried_fill_from_raw import VARIANTS as FILL_VARIANTS  # noqa: E402  (the twenty-second stop's fill variants)
+from tried_fill_from_raw import patch as fill_patch  # noqa: E402
 
 import torch_depth_sr.stream.crop_layers as crop_layers  # noqa: E402
 import torch_depth_sr.stream.frame as frame  # noqa: E402
@@ -78,8 +89,11 @@ def unpulled_join(radius, *args):
 
 
 def use(variant: str) -> None:
+    fill_patch("shipped")
     crop_layers.host_path, frame.join_runs = SHIPPED
-    if variant == "whole":
+    if variant.startswith("fill:") and variant[5:] in FILL_VARIANTS:
+        fill_patch(variant[5:])
+    elif variant == "whole":
         crop_layers.host_path = lambda device: False  # the device path: no crops
     elif variant.startswith("unpulled"):
         radius = int(variant[8:])
@@ -88,7 +102,8 @@ def use(variant: str) -> None:
         radius = int(variant[4:])
         frame.join_runs = lambda *a: near_join(radius, *a)
     elif variant != "shipped":
-        raise SystemExit(f"unknown variant {variant!r}: shipped, whole, nearR or unpulledR (R in px)")
+        raise SystemExit(f"unknown variant {variant!r}: shipped, whole, nearR, unpulledR (R in px) or fill:V, V one "
+                         f"of {FILL_VARIANTS}")
 
 
 def _scene(job) -> tuple[str, list]:
