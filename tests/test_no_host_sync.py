@@ -159,6 +159,34 @@ def test_the_detector_sees_a_sync_put_back(device_path, monkeypatch):
     assert [f for f, _ in rec.found] == ["aten.index.Tensor", "tolist"]
 
 
+def test_a_stream_step_reads_the_device_only_where_it_spares_work(device_path):
+    """Issue 28 on a GPU: a warm stream step (the module's forward, no details) makes the host wait only for the
+    choices that spare work: whether to keep the scale policy (the share of static pixels), whether the kept matches'
+    weights hold (the temperature), whether any pixel must be searched or get the later layers. Its statistics stay
+    on the device unless asked for (``return_details``), and are then read at once. (Before: 19 reads a step, among
+    them each statistic and ``info``'s figures.)"""
+    from torch_depth_sr.stream import StreamRestorer, default_stream_model
+
+    depth, rgb = _sensor_like()
+    stream = StreamRestorer(default_stream_model())
+    spare_work = {"stream/frame.py", "stream/matching.py", "stream/crop_layers.py"}
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for t in range(4):
+            noisy = torch.where(depth > 0, depth + 0.5 * torch.randn(depth.shape, generator=g), depth)
+            with HostSyncs() as rec:
+                stream(noisy, rgb)
+            sites = [where.split(":")[0] for _, where in rec.found]
+            assert sites[:2] == ["_inputs.py", "_inputs.py"], rec.found  # the input checks, as a frame on its own
+            assert set(sites[2:]) <= spare_work and len(sites) <= 6, rec.found
+        with HostSyncs() as rec:
+            r = stream.step(noisy, rgb, return_details=True)
+    stats = r.info["stream"]
+    assert stats["frame"] == 4 and all(isinstance(v, float) for k, v in stats.items() if k != "frame")
+    assert {"outliers_in_time", "held_out", "reused_matches", "held", "filled_from_past", "static"} <= set(stats)
+    assert [f for f, where in rec.found if where.startswith("stream/frame.py")].count("tolist") == 1
+
+
 def test_the_switch(monkeypatch):
     from torch_depth_sr.native import host_path
 

@@ -9,8 +9,9 @@ of elements of the input, so the values are the same bit for bit.
 ``numpy.partition`` itself slows down tenfold on values with many ties (640×480×3 colour changes of which nine in ten
 are exactly 0, as between two frames of a still camera: 14 against 0.9 ms), so :func:`lower_median` first brackets
 the median between two order statistics of a sample and selects among the values between them only
-(:func:`_select_rows`; 0.3 ms there). Other devices, inputs that carry gradients and
-inputs with NaN (where torch returns NaN and numpy would sort it last) take torch's path.
+(:func:`_select_rows`; 0.3 ms there). Other devices (the device path, :func:`~torch_depth_sr.native.host_path`),
+inputs that carry gradients and inputs with NaN (where torch returns NaN and numpy would sort it last) take torch's
+path.
 """
 from __future__ import annotations
 
@@ -19,12 +20,14 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from .native import host_path
+
 __all__ = ["distinct", "kth_smallest", "lower_median"]
 
 
 def _host_values(v: torch.Tensor):
-    """``v`` as a numpy array when numpy may select in it (CPU, no gradient, no NaN), else None."""
-    if v.device.type != "cpu" or v.requires_grad or v.dtype not in (torch.float32, torch.float64):
+    """``v`` as a numpy array when numpy may select in it (the host path, no gradient, no NaN), else None."""
+    if not host_path(v.device) or v.requires_grad or v.dtype not in (torch.float32, torch.float64):
         return None
     a = v.numpy()
     return None if np.isnan(a).any() else a

@@ -31,7 +31,7 @@ only). ``docs/stream.md`` has the measurements.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple, Optional, Union
 
 import torch
 from torch import nn
@@ -40,6 +40,7 @@ from ..config import StreamConfig
 from ..errors import ShapeError
 from ..initial import InitialEstimate
 from ..model import NoiseSigma
+from ..native import host_path
 from ..noise import sampled_noise_sigma
 from ..observation import Observation, ScalePolicy
 from ..state import RestorationState
@@ -87,8 +88,10 @@ class StreamState:
     departed: torch.Tensor  # (B,1,H,W) a measurement held out as the first departure from its run's mean (0: none)
     match_weights: Optional[tuple[torch.Tensor, torch.Tensor]] = None  # the matches' weights, the temperature
     policy: Optional[ScalePolicy] = None  # the observation's scale policy (offset, scale, σ, grid step, percentiles)
-    static_share: float = 1.0  # the share of static pixels (1 on a first frame: it found nothing changed)
+    # the share of static pixels (1 on a first frame: it found nothing changed); a 0-d tensor off the CPU kernels
+    static_share: Union[float, torch.Tensor] = 1.0
     anchor: Optional[torch.Tensor] = None  # (B,1,H,W) the layers' value the output came from (settings.hold)
+
 
 class StreamFrame:
     """The stream hooks of :meth:`DepthRestorer._run` for one frame: the previous frame into the observation and
@@ -98,7 +101,7 @@ class StreamFrame:
         self.settings, self.state, self.index = settings, state, index
         self.kept: Optional[StreamState] = None
         self.valid: Optional[torch.Tensor] = None
-        self.stats: dict = {}
+        self.stats: dict = {}  # the frame's shares: floats, or 0-d tensors read on the host only by stat_values()
         self.static: Optional[torch.Tensor] = None
         self.departed: Optional[torch.Tensor] = None  # this frame's held-out departures (observe), in depth units
         self.fresh: Optional[torch.Tensor] = None  # changed, or a static run younger than max_frames (observe)
@@ -106,6 +109,15 @@ class StreamFrame:
         self.layers_x: Optional[torch.Tensor] = None  # the layers' value, before the post-steps (post)
         self.steady: Optional[torch.Tensor] = None  # the pixels whose previous output is held (post)
         self.unit: Optional[torch.Tensor] = None  # the bounded noise unit of the runs (observe), normalised
+
+    def stat_values(self) -> dict:
+        """The frame's shares (``info["stream"]``) as floats, read from the device at once: a stream step leaves its
+        statistics on the device unless they are asked for (``return_details``), and a GPU then waits for none of
+        them."""
+        lazy = [k for k, v in self.stats.items() if isinstance(v, torch.Tensor)]
+        read = torch.stack([self.stats[k].detach().to(torch.float64) for k in lazy]).tolist() if lazy else []
+        values = dict(zip(lazy, read))
+        return {k: values.get(k, v) for k, v in self.stats.items()}
 
     def scale_policy(self, y: torch.Tensor, observed: torch.Tensor, noise_sigma: NoiseSigma) -> Optional[ScalePolicy]:
         """The previous frame's scale policy while at least half of that frame was static (``keep_scale``): a
@@ -148,9 +160,11 @@ class StreamFrame:
         evidence = st.evidence.to(dt)
         runs = join_runs(obs.y, obs.observed, static, test.outlier, joining, evidence, st.mean.to(dt),
                          st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
-        self.stats["outliers_in_time"] = float(runs.outlier.float().mean())
-        self.stats["held_out"] = float(runs.held_out.float().mean())
-        glitches = obs.glitches | runs.outlier if bool(runs.outlier.any()) else obs.glitches
+        self.stats["outliers_in_time"] = runs.outlier.float().mean()
+        self.stats["held_out"] = runs.held_out.float().mean()
+        # off the CPU without asking the device whether any outlier is there (the same values)
+        added = not host_path(obs.y.device) or bool(runs.outlier.any())
+        glitches = obs.glitches | runs.outlier if added else obs.glitches
         # the singular gate also reads the pixels measured in this frame alone: the runs' means hide the past's
         # flying pixels, and with them a mover's fell below the gate (stages._gate)
         obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches, gate_region=~runs.averaged)
@@ -162,7 +176,7 @@ class StreamFrame:
         if s.reuse_matches and st.matches is not None:
             fresh = dilate(test.changed, search_radius(obs.block_matcher.settings, obs.task))
             obs = replace(obs, block_matcher=StreamMatcher(obs.block_matcher, st.matches, fresh, st.match_weights))
-            self.stats["reused_matches"] = float((~fresh).float().mean())
+            self.stats["reused_matches"] = (~fresh).float().mean()
         return obs
 
     def initial(self, init: nn.Module, obs: Observation) -> InitialEstimate:
@@ -205,7 +219,7 @@ class StreamFrame:
         if hold is not None and self.warm and st.anchor is not None and not training:
             anchor = obs.normalise(st.anchor.to(x))
             self.steady = ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
-            self.stats["held"] = float(self.steady.float().mean())
+            self.stats["held"] = self.steady.float().mean()
         return run_post_steps(steps, x, state, obs, initial, self.steady,
                               None if self.steady is None else obs.temporal.target)
 

@@ -177,7 +177,7 @@ class StreamRestorer(nn.Module):
         dtype = depth.dtype if isinstance(depth, torch.Tensor) and depth.dtype == torch.float64 else torch.float32
         y, observed, layout = parse_depth(depth, mask, dtype)
         out, frame = self._step(y, observed, rgb, noise_sigma, scale_factor, fill, bool(timings) and return_details,
-                                _is_integer_dtype(layout.dtype))
+                                _is_integer_dtype(layout.dtype), return_details)
         x = restore_layout(out.depth, layout)
         if not return_details:
             return x
@@ -193,16 +193,19 @@ class StreamRestorer(nn.Module):
         _check_model_input(depth, rgb, mask)
         dtype = torch.float64 if depth.dtype == torch.float64 else torch.float32
         y, observed, _ = parse_depth(depth, mask, dtype)
-        out, _ = self._step(y, observed, rgb, noise_sigma, None, fill, False, False)
+        out, _ = self._step(y, observed, rgb, noise_sigma, None, fill, False, False, False)
         return out.depth.to(device=depth.device, dtype=depth.dtype)
 
-    def _step(self, y, observed, rgb, noise_sigma, scale_factor, fill, timed, integer_input):
+    def _step(self, y, observed, rgb, noise_sigma, scale_factor, fill, timed, integer_input, details):
+        """One frame through the model with the stream's hooks. ``details``: build ``info`` (its figures are read
+        from the device); without them a step reads nothing from a GPU that the model does not."""
         frame = StreamFrame(self.settings, self.state, self.frames)
         sigma = self.noise_sigma if noise_sigma is None else noise_sigma
         out = self.model._run(y, observed, rgb, sigma, scale_factor, fill, timed=timed, integer_input=integer_input,
-                              stream=frame)
+                              stream=frame, details=details)
         self.state = frame.kept
-        out.info["stream"] = {"frame": self.frames, **frame.stats}
+        if details:
+            out.info["stream"] = {"frame": self.frames, **frame.stat_values()}
         self.frames += 1
         return out, frame
 

@@ -21,7 +21,7 @@ same values in one pass, with the same float32/float64 operations in the same or
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Union
 
 import torch
 
@@ -87,8 +87,10 @@ class GrownRuns(NamedTuple):
     evidence: torch.Tensor  # trusted measurements of the run, decaying over holes
     confidence: torch.Tensor  # the model's where measured, the past's decayed on a static hole, else 0
     mean: torch.Tensor  # the run's mean measurement (depth units; 0: none)
-    filled_from_past: float  # the share of pixels that are holes filled from a confident past
-    static: float  # the share of static pixels
+    # the share of pixels that are holes filled from a confident past, and of static pixels: floats from the CPU
+    # kernel, 0-d tensors from the torch path (read on the host only when asked: a GPU does not wait for them)
+    filled_from_past: Union[float, torch.Tensor]
+    static: Union[float, torch.Tensor]
 
 
 def grow_runs(y: torch.Tensor, observed: torch.Tensor, trusted: torch.Tensor, confidence: torch.Tensor,
@@ -115,4 +117,4 @@ def grow_runs(y: torch.Tensor, observed: torch.Tensor, trusted: torch.Tensor, co
     ymean = torch.where(measured, y * scale.view(-1, 1, 1, 1) + offset.view(-1, 1, 1, 1), zero)
     mean = torch.where(measured, ymean, torch.where(static, past_mean, zero))
     filled = ~measured & static & (evidence >= s.fill_evidence)
-    return GrownRuns(aged, new_evidence, confidence, mean, float(filled.float().mean()), float(static.float().mean()))
+    return GrownRuns(aged, new_evidence, confidence, mean, filled.float().mean(), static.float().mean())
