@@ -40,7 +40,6 @@ from ..config import StreamConfig
 from ..errors import ShapeError
 from ..initial import InitialEstimate
 from ..model import NoiseSigma
-from ..native import host_path
 from ..noise import sampled_noise_sigma
 from ..observation import Observation, ScalePolicy
 from ..state import RestorationState
@@ -162,9 +161,7 @@ class StreamFrame:
                          st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
         self.stats["outliers_in_time"] = runs.outlier.float().mean()
         self.stats["held_out"] = runs.held_out.float().mean()
-        # off the CPU without asking the device whether any outlier is there (the same values)
-        added = not host_path(obs.y.device) or bool(runs.outlier.any())
-        glitches = obs.glitches | runs.outlier if added else obs.glitches
+        glitches = obs.glitches | runs.outlier  # one cheap pass; asking first whether any is there made a GPU wait
         # the singular gate also reads the pixels measured in this frame alone: the runs' means hide the past's
         # flying pixels, and with them a mover's fell below the gate (stages._gate)
         obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches, gate_region=~runs.averaged)
