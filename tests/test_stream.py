@@ -526,6 +526,26 @@ def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_a
     assert [k for k, _ in seen] == [False, False, False]
 
 
+def test_an_object_outside_the_kept_policys_range_is_a_surface_not_a_glitch():
+    """A kept scale policy calls values far outside the still scene's range implausible (sensor glitches). A person
+    arriving 0.8 m in front of a wall is no glitch: the frame's policy is estimated again, and the stream shows the
+    person where it measured them, not the wall it remembers behind them, in each frame that follows."""
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    wall = 1500 + 2 * yy + xx  # 1500-1625 mm: a narrow range, so 700 mm is far outside it
+    rgb = np.zeros((3, H, W), np.float32)
+    rgb[:] = np.array([0.2, 0.4, 0.8], np.float32)[:, None, None]
+    s = StreamRestorer(small_model())
+    s.step(np.round(wall + 4 * rng.standard_normal(wall.shape)).astype(np.uint16), rgb)
+    scene, colour = wall.copy(), rgb.copy()
+    scene[10:20, 8:20] = 700
+    colour[:, 10:20, 8:20] = np.array([0.9, 0.2, 0.1], np.float32)[:, None, None]
+    for t in range(3):
+        y = np.round(scene + 4 * rng.standard_normal(wall.shape)).astype(np.uint16)
+        out = np.asarray(s.step(y, colour), dtype=np.float64)
+        assert np.abs(out[11:19, 9:19] - 700).max() < 25, (t, out[11:19, 9:19].mean())
+
+
 def test_a_given_noise_level_makes_a_kept_scale_policy_estimate_nothing(monkeypatch):
     import torch_depth_sr.stream.frame as frame
 

@@ -60,6 +60,9 @@ class Observation:
     # (B,1,h,w) bool: pixels whose share of gross failures the singular gate also reads on its own (a stream: those
     # measured in this frame alone, not a run's mean); None: the gate reads the whole frame only
     gate_region: Optional[torch.Tensor] = None
+    # (B,1,h,w) bool: measurements the singular test does not trust, whatever it finds (a stream's measurements of
+    # this frame alone without the support of their neighbours, ``StreamConfig.single_support``); None: none
+    untrusted: Optional[torch.Tensor] = None
     percentiles: Optional[torch.Tensor] = None  # (B,2) p1 and p99 of the measured depth (the scale policy's)
 
     @property
@@ -96,32 +99,58 @@ def observe(y: torch.Tensor, observed: torch.Tensor, guide: Optional[torch.Tenso
             policy: Optional[ScalePolicy] = None) -> Observation:
     """The scale policy: quantisation step, noise σ̂, offset and scale of ``y (B,1,h,w)``, implausible values
     (glitches) taken as missing and the scale estimated again without them; the task from ``K``. With ``policy``
-    (a stream's previous frame, :class:`ScalePolicy`) nothing is estimated: the frame is normalised with it, its
-    glitches found against its percentiles (a ``noise_sigma`` given still sets σ and the scale)."""
+    (a stream's previous frame, :class:`ScalePolicy`) nothing is estimated: the frame is normalised with it (a
+    ``noise_sigma`` given still sets σ and the scale), unless a measurement of the frame lies outside the range that
+    policy calls plausible. That sample's policy is then estimated again, as without one: a new object nearer or
+    farther than everything the still scene held is a surface, not a glitch of the sensor (kept, the policy took a
+    person arriving 0.8 m in front of a wall for glitches, and the stream filled them with the wall behind)."""
     b = y.shape[0]
-    if policy is not None:
-        offset, _, sigma, step, percentiles = policy
-        if noise_sigma is not None:
-            given = check_noise_sigma(noise_sigma, b)
-            sigma = torch.as_tensor(given, dtype=y.dtype, device=y.device).expand(b).clone()
-        scale = policy_scale(sigma, percentiles[:, 1] - percentiles[:, 0], offset)
-        glitches = implausible(y, observed, scale, percentiles=percentiles)
-        observed = torch.where(glitches, torch.zeros_like(observed), observed)
+    if policy is None:
+        offset, scale, sigma, step, percentiles, glitches = _estimated(y, observed, noise_sigma, integer_input)
     else:
-        step = quantisation_step(y, observed, integer_input=integer_input)
-        percentiles = sample_percentiles(y, observed)
-        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step,
-                                           percentiles=percentiles)
-        glitches = implausible(y, observed, scale, percentiles=percentiles)
-        # off the CPU the scale is estimated again whatever the glitches (without any it comes out the same): asking
-        # would make the host wait for the device
-        if not host_path(y.device) or bool(glitches.any()):  # a glitch is a missing measurement: the scale as if it had never been there
-            observed = torch.where(glitches, torch.zeros_like(observed), observed)
-            step = quantisation_step(y, observed, integer_input=integer_input)
-            offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
+        offset, scale, sigma, step, percentiles, glitches = _kept(y, observed, noise_sigma, integer_input, policy)
+    observed = torch.where(glitches, torch.zeros_like(observed), observed)
     o4, s4 = offset.view(b, 1, 1, 1), scale.view(b, 1, 1, 1)
     yn = torch.where(observed > 0, (y - o4) / s4, torch.zeros_like(y))
     return Observation(y=yn, observed=observed, rgb=guide, K=K, task="denoise" if K.is_identity else "upsample",
                        raw=y, offset=offset, scale=scale, sigma=sigma, step=step, glitches=glitches,
                        sigma_given=noise_sigma is not None, block_matcher=block_matcher,
                        log=RunLog(timings={} if timed else None), percentiles=percentiles)
+
+
+def _estimated(y: torch.Tensor, observed: torch.Tensor, noise_sigma: Any, integer_input: bool) -> tuple:
+    """``(offset, scale, sigma, step, percentiles, glitches)`` estimated from the frame, each (B,) but the
+    percentiles (B,2) and the glitches (B,1,h,w)."""
+    b = y.shape[0]
+    step = quantisation_step(y, observed, integer_input=integer_input)
+    percentiles = sample_percentiles(y, observed)
+    offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step,
+                                       percentiles=percentiles)
+    glitches = implausible(y, observed, scale, percentiles=percentiles)
+    # a glitch is a missing measurement: the scale as if it had never been there. Off the CPU the scale is estimated
+    # again whatever the glitches (without any it comes out the same): asking would make the host wait for the device
+    if not host_path(y.device) or bool(glitches.any()):
+        observed = torch.where(glitches, torch.zeros_like(observed), observed)
+        step = quantisation_step(y, observed, integer_input=integer_input)
+        offset, scale, sigma = depth_scale(y, observed, check_noise_sigma(noise_sigma, b), step=step)
+    return offset, scale, sigma, step, percentiles, glitches
+
+
+def _kept(y: torch.Tensor, observed: torch.Tensor, noise_sigma: Any, integer_input: bool,
+          policy: ScalePolicy) -> tuple:
+    """What :func:`_estimated` returns, from ``policy`` where every measurement of the sample is plausible under
+    it, else estimated again. On the CPU the frame is estimated only when a sample needs it; elsewhere always (asking
+    would make the host wait for the device), and each sample takes its own."""
+    b = y.shape[0]
+    offset, _, sigma, step, percentiles = policy
+    if noise_sigma is not None:
+        given = check_noise_sigma(noise_sigma, b)
+        sigma = torch.as_tensor(given, dtype=y.dtype, device=y.device).expand(b).clone()
+    scale = policy_scale(sigma, percentiles[:, 1] - percentiles[:, 0], offset)
+    glitches = implausible(y, observed, scale, percentiles=percentiles)
+    outside = glitches.flatten(1).any(1)  # (B,): a measurement the kept policy calls implausible
+    if host_path(y.device) and not bool(outside.any()):
+        return offset, scale, sigma, step, percentiles, glitches
+    fresh = _estimated(y, observed, noise_sigma, integer_input)
+    kept = (offset, scale, sigma, step, percentiles, glitches)
+    return tuple(torch.where(outside.view(-1, *([1] * (k.dim() - 1))), f, k) for f, k in zip(fresh, kept))
