@@ -179,6 +179,11 @@ def _no_gate(obs: Observation, q: torch.Tensor, conf: torch.Tensor, c: SingularC
     return q, None
 
 
+def _distrust(obs: Observation, q: torch.Tensor) -> torch.Tensor:
+    """Q = 0 at the measurements ``obs.untrusted`` names (a stream's: its single measurements without support)."""
+    return q if obs.untrusted is None else torch.where(obs.untrusted, torch.zeros_like(q), q)
+
+
 class SingularDetector(nn.Module):
     """The singular-pixel test (:func:`~torch_depth_sr.singular.detect_singular`) with its neighbour/line support and
     its per-sample gate, settings :class:`~torch_depth_sr.config.SingularConfig`. On the observation grid (denoising)
@@ -200,13 +205,14 @@ class SingularDetector(nn.Module):
                 matches: BlockMatches) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """``(Q, confidence, clean)`` of ``x`` against ``obs.y``: Q and the soft confidence P(x_i) (0 at missing
         pixels) (B,1,h,w), and the gate's verdict (B,1,1,1) bool, None without a gate. ``obs.supported`` is what
-        :meth:`supported` returned."""
+        :meth:`supported` returned; Q is 0 at ``obs.untrusted``, whatever the test and the gate say."""
         c = self.settings
         with stage(obs.log.timings, "singular", x.device), torch.no_grad():
             q, conf = detect_singular(obs.y, x.detach(), obs.observed, matches, sigma_floor=c.sigma_floor,
                                       tau=c.tau, rounds=c.rounds, return_confidence=True)
             q, conf = self._trust_supported(obs, q, conf, c)
             q, clean = self._gate(obs, q, conf, c)
+            q = _distrust(obs, q)
         return q.to(x.dtype), conf.to(x.dtype), clean
 
     def extra_repr(self) -> str:

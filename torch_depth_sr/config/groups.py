@@ -425,7 +425,12 @@ class StreamConfig(Group):
     snap, edge refit, the refiner) act on the other pixels only, which on sensor input with flying pixels is most of
     what a step saves (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere). Nothing is held
     while a gradient is tracked (training). "Its full mean" is a static run of at least ``settled_frames`` frames (None:
-    ``max_frames``): where the later layers and the post-steps may leave a pixel to its past."""
+    ``max_frames``): where the later layers and the post-steps may leave a pixel to its past.
+
+    A measurement of this frame alone (not a run's mean: a changed pixel, a new run) is trusted only with at least
+    ``single_support`` measured 8-neighbours within ``SingularConfig.support_tol`` or on a line
+    (``SingularConfig.line_support``), whatever the singular test says: a flying pixel at a mover floats alone (None:
+    no such rule; nothing without a singular test)."""
 
     # weight and max_frames fitted with the fast tier on static streams of the 2006 scenes (docs/measurements/
     # issue28-stream/fit_stream_2006.py: the lowest error among the settings that leave no scene worse than frame by
@@ -464,6 +469,12 @@ class StreamConfig(Group):
     # 2006 streams (fitting split) 5 % worse on the mean of the four groups (4: 1.7 % worse; docs/measurements/
     # issue28-stream/twenty-second-stop/)
     settled_frames: Optional[float] = None
+    # of 1, 2 and 3 on the 45 synthetic fitting sequences (120×160): 1, the lowest RMSE and flicker (0.703 and 0.380 of
+    # frame by frame's, against 0.761 and 0.394 without the rule), the trail within 0.3 % of the shortest (0.905
+    # against 0.989; longer than frame by frame's in 1 sequence instead of 14); 2 and 3 also left more well-measured
+    # pixels of a slow mover far off (test_stream_known_limits: 204 and 247 against 167, 164 without the rule)
+    # (docs/measurements/issue28-stream/twenty-sixth-stop/)
+    single_support: Optional[int] = 1
     _NAME: ClassVar[str] = "stream"
     _CHECKS: ClassVar[dict] = {"weight": positive, "max_frames": positive, "unmeasured_frames": non_negative,
                                "hole_decay": real(0.0, 1.0, False), "fill_evidence": positive,
@@ -472,7 +483,8 @@ class StreamConfig(Group):
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
                                "keep_scale": boolean, "join_cap": optional(positive),
                                "shift_test": optional(real(0.0, 1.0)), "hold": optional(positive),
-                               "layers": optional(integer(1)), "settled_frames": optional(positive)}
+                               "layers": optional(integer(1)), "settled_frames": optional(positive),
+                               "single_support": optional(integer(1))}
 
     def settled_age(self) -> float:
         """The age from which a static run is settled (not ``fresh``): ``settled_frames``, or ``max_frames``."""

@@ -11,7 +11,9 @@ confidence, the local noise spread; the colour image and the last matches. The f
    out); a dropped or held-out value that the next frame measures again starts a new run; the temporal prior
    (``obs.temporal``: the previous estimate and the weight ``settings.weight × age`` on static pixels, read by
    :class:`~torch_depth_sr.terms.TemporalPriorTerm` in every layer) and the matcher that keeps the previous matches
-   where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`);
+   where they lie in static parts (:class:`~torch_depth_sr.stream.matching.StreamMatcher`); the pixels measured in
+   this frame alone are read by the singular gate on their own and, with ``settings.single_support``, trusted only
+   with the support of their neighbours (``obs.gate_region``, ``obs.untrusted``);
 2. ``initial`` — the model's initial stage, then the verdict of each hole for ``fill="trusted"``: filled from a
    confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
    unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
@@ -36,12 +38,13 @@ from typing import Any, NamedTuple, Optional, Union
 import torch
 from torch import nn
 
-from ..config import StreamConfig
+from ..config import SingularConfig, StreamConfig
 from ..errors import ShapeError
 from ..initial import InitialEstimate
 from ..model import NoiseSigma
 from ..noise import sampled_noise_sigma
 from ..observation import Observation, ScalePolicy
+from ..stages import supported_pixels
 from ..state import RestorationState
 from .change import change_test, local_spread, remembered_spread
 from .crop_layers import run_later_layers
@@ -96,8 +99,10 @@ class StreamFrame:
     """The stream hooks of :meth:`DepthRestorer._run` for one frame: the previous frame into the observation and
     the initial stage, this frame kept for the next (:attr:`kept`)."""
 
-    def __init__(self, settings: StreamConfig, state: Optional[StreamState], index: int = 0):
+    def __init__(self, settings: StreamConfig, state: Optional[StreamState], index: int = 0,
+                 singular: Optional[SingularConfig] = None):
         self.settings, self.state, self.index = settings, state, index
+        self.singular = singular  # the model's singular test's settings (None: no test): the support rule's
         self.kept: Optional[StreamState] = None
         self.valid: Optional[torch.Tensor] = None
         self.stats: dict = {}  # the frame's shares: floats, or 0-d tensors read on the host only by stat_values()
@@ -136,6 +141,18 @@ class StreamFrame:
         sigma = torch.where(sampled > 0, 0.75 * policy.sigma + 0.25 * sampled, policy.sigma)
         return policy._replace(sigma=torch.maximum(sigma, policy.step / 12**0.5))
 
+    def _unsupported(self, alone: torch.Tensor, y: torch.Tensor, observed: torch.Tensor,
+                     grid_step: torch.Tensor) -> Optional[torch.Tensor]:
+        """The measurements of this frame alone (``alone``) with fewer than ``settings.single_support`` agreeing
+        8-neighbours and on no line (the model's support rule, its tolerance): the singular test will not trust them.
+        A flying pixel at a mover floats alone; frame-by-frame restoration's test distrusted such pixels more often
+        than the stream's, whose static neighbours see their runs' means, and the stream's trail was the longer
+        (docs/measurements/issue28-stream/twenty-sixth-stop/). None: no rule (or no singular test)."""
+        n = self.settings.single_support
+        if n is None or self.singular is None:
+            return None
+        return alone & ~supported_pixels(y, observed, grid_step, replace(self.singular, support=n))
+
     def observe(self, obs: Observation) -> Observation:
         s, st = self.settings, self.state
         if st is None or obs.task != "denoise":
@@ -164,7 +181,9 @@ class StreamFrame:
         glitches = obs.glitches | runs.outlier  # one cheap pass; asking first whether any is there made a GPU wait
         # the singular gate also reads the pixels measured in this frame alone: the runs' means hide the past's
         # flying pixels, and with them a mover's fell below the gate (stages._gate)
-        obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches, gate_region=~runs.averaged)
+        alone = ~runs.averaged
+        obs = replace(obs, y=runs.y, observed=runs.observed, glitches=glitches, gate_region=alone,
+                      untrusted=self._unsupported(alone, runs.y, runs.observed, obs.grid_step))
         self.departed = runs.departed.detach()
         self.static, self.warm, self.fresh = static, True, runs.fresh
         self.unit = joining

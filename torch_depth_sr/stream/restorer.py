@@ -16,7 +16,7 @@ import torch
 from torch import nn
 
 from .._inputs import map_layout, parse_depth, restore_layout
-from ..config import StreamConfig
+from ..config import SingularConfig, StreamConfig
 from ..model import DepthRestorer, NoiseSigma, _check_fill, _check_model_input, _is_integer_dtype
 from ..terms import TemporalPriorTerm
 from .frame import StreamFrame, StreamState, TemporalPrior
@@ -90,6 +90,12 @@ DEFAULT_STREAM_MODEL = "denoise-fast"
 """The shipped model a stream runs without a model: the 3-layer ``denoise-fast`` (the ``fast`` tier until
 2026-12-05). Its stream settings (``layers`` 1 in its config) were fitted for it, and every figure of
 ``docs/stream.md`` (the ``stream`` track's default ``--model``) is of it."""
+
+
+def _singular_settings(model: DepthRestorer) -> Optional[SingularConfig]:
+    """The settings of the model's singular test (the stream's support rule reads its tolerance and its line rule);
+    None when the layers run no such test."""
+    return model.config.singular if model.config.uses("singular") else None
 
 
 def default_stream_model() -> DepthRestorer:
@@ -199,7 +205,7 @@ class StreamRestorer(nn.Module):
     def _step(self, y, observed, rgb, noise_sigma, scale_factor, fill, timed, integer_input, details):
         """One frame through the model with the stream's hooks. ``details``: build ``info`` (its figures are read
         from the device); without them a step reads nothing from a GPU that the model does not."""
-        frame = StreamFrame(self.settings, self.state, self.frames)
+        frame = StreamFrame(self.settings, self.state, self.frames, singular=_singular_settings(self.model))
         sigma = self.noise_sigma if noise_sigma is None else noise_sigma
         out = self.model._run(y, observed, rgb, sigma, scale_factor, fill, timed=timed, integer_input=integer_input,
                               stream=frame, details=details)
