@@ -9,7 +9,8 @@ test called static or changed; measured pixels trusted by both, by the stream on
 neither; and the stream-only trusted ones split again by change and by whether the measurement is a gross error
 (``|y − gt| > 5 σ̂``, σ̂ the frame's 1.4826 × median ``|y − gt|``: a flying pixel or an impulse).
 
-    OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/twenty-fourth-stop/trail_excess.py --size 480x640
+    OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/twenty-fourth-stop/trail_excess.py --size 480x640 \
+        [--seeds 303]
 
 Fitting scenes only (the three tuning sequences): it reads ground truth to sort pixels, which the stream never does.
 """
@@ -23,7 +24,7 @@ import numpy as np
 import torch
 
 from torch_depth_sr import restore_depth
-from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence
+from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences
 from torch_depth_sr.evaluation.stream import regions
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
@@ -77,10 +78,13 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--size", default="480x640")
     p.add_argument("--processes", type=int, default=2)
+    p.add_argument("--seeds", type=int, nargs="+", help="the three recipes with these seeds instead of the tuning "
+                   "sequences (fitting seeds only: 300-303, 400-409)")
     a = p.parse_args()
     size = tuple(int(t) for t in a.size.split("x"))
+    specs = TUNING_SEQUENCES if not a.seeds else recipe_sequences(a.seeds)
     with Pool(a.processes) as pool:
-        results = pool.map(_sequence, [(s, size) for s in TUNING_SEQUENCES], chunksize=1)
+        results = pool.map(_sequence, [(s, size) for s in specs], chunksize=1)
     for name, rows, trail_stream, trail_frame in results:
         print(f"{name} at {a.size}: trail {trail_stream:.2f} stream, {trail_frame:.2f} frame by frame; "
               f"MSE difference {trail_stream ** 2 - trail_frame ** 2:+.2f}, by group (pixel-frames):")
