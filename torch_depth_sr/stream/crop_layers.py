@@ -32,8 +32,7 @@ from .matching import crop_matches, crops, search_radius
 __all__ = ["run_later_layers"]
 
 # the observation's per-pixel fields, cut with the crop (the others are per sample or shared)
-_OBS_MAPS = ("y", "observed", "rgb", "raw", "glitches", "prior", "supported", "gate_region",
-            "untrusted")
+_OBS_MAPS = ("y", "observed", "rgb", "raw", "glitches", "prior", "supported", "gate_region", "untrusted")
 # the state's per-pixel fields, cut with the crop and pasted back where the scene changed
 _STATE_MAPS = ("x", "z", "w", "e", "alpha", "q", "confidence")
 
