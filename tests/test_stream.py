@@ -546,6 +546,34 @@ def test_an_object_outside_the_kept_policys_range_is_a_surface_not_a_glitch():
         assert np.abs(out[11:19, 9:19] - 700).max() < 25, (t, out[11:19, 9:19].mean())
 
 
+@pytest.mark.parametrize("device_path", [False, True])
+def test_a_kept_policy_is_estimated_again_only_in_the_sample_that_leaves_its_range(device_path, monkeypatch):
+    """Per sample: the sample with an arrival outside the kept range takes the frame's own estimate, the other keeps
+    the policy; the device path (no host read) picks the same."""
+    from torch_depth_sr.observation import observe
+    from torch_depth_sr.operators import Identity
+
+    if device_path:
+        monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
+    rng = np.random.default_rng(0)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    wall = 1500 + 2 * yy + xx
+    frames = torch.from_numpy(np.stack([np.round(wall + 4 * rng.standard_normal(wall.shape)) for _ in range(2)]))
+    y = frames[:, None].float()
+    obs = torch.ones_like(y)
+    K = Identity()
+    policy = observe(y, obs, None, K, None, True, None, False).policy  # the still scene's, per sample
+    moved = y.clone()
+    moved[0, 0, 10:20, 8:20] = 700  # sample 0: a person arrives
+    o = observe(moved, obs, None, K, None, True, None, False, policy=policy)
+    fresh = observe(moved, obs, None, K, None, True, None, False)
+    assert not bool(o.glitches.any())  # the arrival is measured
+    torch.testing.assert_close(o.percentiles[0], fresh.percentiles[0], rtol=0, atol=0)
+    torch.testing.assert_close(o.offset[0], fresh.offset[0], rtol=0, atol=0)
+    torch.testing.assert_close(o.percentiles[1], policy.percentiles[1], rtol=0, atol=0)  # sample 1 keeps its own
+    torch.testing.assert_close(o.offset[1], policy.offset[1], rtol=0, atol=0)
+
+
 def test_a_given_noise_level_makes_a_kept_scale_policy_estimate_nothing(monkeypatch):
     import torch_depth_sr.stream.frame as frame
 
