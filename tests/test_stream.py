@@ -526,23 +526,29 @@ def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_a
     assert [k for k, _ in seen] == [False, False, False]
 
 
+def _wall(rng: np.random.Generator, arrival: bool) -> np.ndarray:
+    """A still wall (1500-1625 mm: a narrow range, so 700 mm is far outside it) measured with noise σ 4 mm; with
+    ``arrival``, a person at 700 mm in rows 10-19, columns 8-19."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    scene = 1500 + 2 * yy + xx
+    if arrival:
+        scene[10:20, 8:20] = 700
+    return np.round(scene + 4 * rng.standard_normal(scene.shape)).astype(np.uint16)
+
+
 def test_an_object_outside_the_kept_policys_range_is_a_surface_not_a_glitch():
     """A kept scale policy calls values far outside the still scene's range implausible (sensor glitches). A person
     arriving 0.8 m in front of a wall is no glitch: the frame's policy is estimated again, and the stream shows the
     person where it measured them, not the wall it remembers behind them, in each frame that follows."""
     rng = np.random.default_rng(0)
-    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    wall = 1500 + 2 * yy + xx  # 1500-1625 mm: a narrow range, so 700 mm is far outside it
     rgb = np.zeros((3, H, W), np.float32)
     rgb[:] = np.array([0.2, 0.4, 0.8], np.float32)[:, None, None]
     s = StreamRestorer(small_model())
-    s.step(np.round(wall + 4 * rng.standard_normal(wall.shape)).astype(np.uint16), rgb)
-    scene, colour = wall.copy(), rgb.copy()
-    scene[10:20, 8:20] = 700
+    s.step(_wall(rng, arrival=False), rgb)
+    colour = rgb.copy()
     colour[:, 10:20, 8:20] = np.array([0.9, 0.2, 0.1], np.float32)[:, None, None]
     for t in range(3):
-        y = np.round(scene + 4 * rng.standard_normal(wall.shape)).astype(np.uint16)
-        out = np.asarray(s.step(y, colour), dtype=np.float64)
+        out = np.asarray(s.step(_wall(rng, arrival=True), colour), dtype=np.float64)
         assert np.abs(out[11:19, 9:19] - 700).max() < 25, (t, out[11:19, 9:19].mean())
 
 
@@ -556,15 +562,12 @@ def test_a_kept_policy_is_estimated_again_only_in_the_sample_that_leaves_its_ran
     if device_path:
         monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
     rng = np.random.default_rng(0)
-    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    wall = 1500 + 2 * yy + xx
-    frames = torch.from_numpy(np.stack([np.round(wall + 4 * rng.standard_normal(wall.shape)) for _ in range(2)]))
-    y = frames[:, None].float()
+    y = torch.from_numpy(np.stack([_wall(rng, arrival=False) for _ in range(2)]))[:, None].float()
     obs = torch.ones_like(y)
     K = Identity()
     policy = observe(y, obs, None, K, None, True, None, False).policy  # the still scene's, per sample
     moved = y.clone()
-    moved[0, 0, 10:20, 8:20] = 700  # sample 0: a person arrives
+    moved[0, 0] = torch.from_numpy(_wall(rng, arrival=True)).float()  # sample 0: a person arrives
     o = observe(moved, obs, None, K, None, True, None, False, policy=policy)
     fresh = observe(moved, obs, None, K, None, True, None, False)
     assert not bool(o.glitches.any())  # the arrival is measured

@@ -46,7 +46,9 @@ def _run(settings=None, seen=None):
     return s.step(*second, return_details=True)
 
 
-def test_an_unsupported_measurement_of_this_frame_alone_is_not_trusted(monkeypatch):
+@pytest.fixture
+def detector_sees(monkeypatch) -> list:
+    """What each singular test is given: ``(untrusted, gate_region, supported)``, or None without the rule."""
     seen = []
     forward = stages.SingularDetector.forward
 
@@ -56,6 +58,11 @@ def test_an_unsupported_measurement_of_this_frame_alone_is_not_trusted(monkeypat
         return forward(self, obs, x, matches)
 
     monkeypatch.setattr(stages.SingularDetector, "forward", spy)
+    return seen
+
+
+def test_an_unsupported_measurement_of_this_frame_alone_is_not_trusted(detector_sees):
+    seen = detector_sees
     r = _run(seen=seen)
     assert seen and all(c is not None and torch.equal(c[0], seen[-1][0]) for c in seen)  # x⁰'s test, every layer's
     untrusted, alone, supported = (t[0, 0] for t in seen[-1])
@@ -68,17 +75,9 @@ def test_an_unsupported_measurement_of_this_frame_alone_is_not_trusted(monkeypat
     assert float(np.asarray(r.trusted)[11:19, 9:19].mean()) > 0.9
 
 
-def test_without_the_rule_nothing_is_marked(monkeypatch):
-    seen = []
-    forward = stages.SingularDetector.forward
-
-    def spy(self, obs, x, matches):
-        seen.append(obs.untrusted)
-        return forward(self, obs, x, matches)
-
-    monkeypatch.setattr(stages.SingularDetector, "forward", spy)
-    _run({"single_support": None})
-    assert seen and all(u is None for u in seen)
+def test_without_the_rule_nothing_is_marked(detector_sees):
+    _run({"single_support": None}, seen=detector_sees)
+    assert detector_sees and all(c is None for c in detector_sees)
 
 
 def test_the_rule_changes_only_the_trust_of_the_marked_pixels():
