@@ -164,3 +164,21 @@ def test_range_weights_kernel_equals_torch_path_and_spare_alpha(dtype):
     fast = nonlocal_terms(x, gx, m, **kw)
     torch.testing.assert_close(fast[0], ref[0])
     torch.testing.assert_close(fast[2], ref[2])
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_a_region_gets_the_values_of_every_pixel_computed(dtype):
+    """``region``: the numba kernel computes its pixels alone, with the values a whole-frame call gives them; the
+    other pixels are 0."""
+    pytest.importorskip("numba")
+    x, gx, m = _inputs(dtype)
+    region = torch.rand(x.shape, generator=torch.Generator().manual_seed(3)) < 0.3
+    region[0, 0, 4:9, 10:30] = True  # runs of region pixels longer than one
+    kw = dict(value_weight=10.0, max_var=0.25, max_offset=2.5, plane_ridge=0.1, range_sigma=1.0)
+    full = nonlocal_terms(x, gx, m, **kw)
+    part = nonlocal_terms(x, gx, m, region=region, **kw)
+    for a, b in zip(full, part):
+        r = region.expand_as(a)
+        assert torch.equal(b[r], a[r])
+    alpha = part[0]
+    assert not alpha[~region.expand_as(alpha)].any() and alpha[region.expand_as(alpha)].abs().sum() > 0

@@ -126,6 +126,37 @@ def test_numba_kernel_matches_torch_path(dtype, threads):
     torch.testing.assert_close(pn, pt, atol=1e-5, rtol=1e-4)
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_region_gets_the_q_and_p_of_every_pixel_computed(threads):
+    """``region``: the numba kernel computes each round only where the region's result reads it (the region, and the
+    matched centres of a later round's pixels); at the region's pixels Q and P are those of the whole test, bit for
+    bit, while pixels far from it are left out (their Q stays Q⁰ = measured, their P 0)."""
+    pytest.importorskip("numba")
+    x, y, _ = _scene(seed=4, b=2, noise=1.0)
+    x = x + 0.3 * (y - x)
+    obs = (torch.rand(y.shape, generator=torch.Generator().manual_seed(1)) > 0.1).float()
+    m = block_match(x, None, None, block_size=3, search_window=9, k=6)
+    region = torch.zeros_like(y, dtype=torch.bool)
+    region[0, 0, 5:12, 30:44] = True
+    region[1, 0, 20:26, 3:9] = True
+    old = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        q_all, p_all = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True,
+                                       backend="numba")
+        q, p = detect_singular(y, x, obs, m, sigma_floor=0.8, rounds=3, return_confidence=True, region=region,
+                               reach=4, backend="numba")
+    finally:
+        torch.set_num_threads(old)
+    assert torch.equal(q[region], q_all[region]) and torch.equal(p[region], p_all[region])
+    assert (q_all[region] == 0).any() and (q_all[region] != obs[region]).any()  # the region holds rejected pixels
+    far = torch.ones_like(region)
+    far[0, 0, 0:12 + 8, 30 - 8:44 + 8] = False  # beyond 2 reaches of the region: no round computed
+    far[1, 0, 20 - 8:26 + 8, 0:9 + 8] = False
+    assert torch.equal(q[far], obs[far]) and not p[far].any()
+    assert (q_all[far] != obs[far]).any()  # the whole test does reject pixels there
+
+
 def test_later_rounds_change_q():
     """Pixels rejected in round 1 leave the statistics, so round 2 trusts or rejects others: Q differs."""
     x, y, _ = _scene(seed=4, b=1, noise=1.0)

@@ -351,9 +351,7 @@ def test_a_frame_with_a_previous_one_runs_the_first_layers_setting():
     assert DepthRestorer.from_pretrained(DEFAULT_STREAM_MODEL).config.stream.layers == 1  # the stream's model has it
 
 
-def test_later_layers_on_crops_equal_the_whole_frame_where_everything_changed():
-    from torch_depth_sr.stream.crop_layers import run_later_layers
-
+def test_later_layers_equal_the_whole_frame_where_everything_changed():
     gt, rgb = _scene()
     m = small_model()
     s = StreamRestorer(m, {"layers": 1})
@@ -365,35 +363,75 @@ def test_later_layers_on_crops_equal_the_whole_frame_where_everything_changed():
     rgb_s = np.roll(rgb, 3, axis=2)
     a, b = s.step(shifted, rgb_s), every.step(shifted, rgb_s)
     assert np.array_equal(a, b)
-    assert callable(run_later_layers)
 
 
-def test_off_the_cpu_the_later_layers_run_on_the_whole_frame(monkeypatch):
-    """On the device path (a GPU's) no crops are cut: a moved object's pixels still get every layer, the rest of the
-    frame keeps the first layer's values, as on the CPU where it holds crops (docs/measurements/h100-2026-12-05)."""
-    from torch_depth_sr.stream import crop_layers
+def _moved_object_after_static_frames(monkeypatch, path: str):
+    """A stream of a model without re-matching in its later layers: five static frames, then an object moved in;
+    the later layers' update regions it ran with are recorded."""
+    from torch_depth_sr.stream import frame as frame_module
 
     gt, rgb = _scene()
     moved = _noisy(gt, 9).astype(np.float32)
     moved[10:20, 5:15] = 700.0
     rgb2 = rgb.copy()
     rgb2[:, 10:20, 5:15] = 0.9
-    outs = {}
-    for path in ("host", "device"):
-        if path == "device":
-            monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
-        cut = []
-        monkeypatch.setattr(crop_layers, "crops", lambda *a, cut=cut, real=crop_layers.crops: cut.append(1) or real(*a))
-        model = DepthRestorer(num_layers=3, block_matching={"search_window": 7, "k": 6, "match_layers": (0,)})
-        s = StreamRestorer(model, {"layers": 1, "max_frames": 3})  # no re-matching in the later layers: croppable
-        for t in range(5):
-            s.step(_noisy(gt, t), rgb)
-        outs[path] = (s.step(moved, rgb2), cut)
-        monkeypatch.undo()
-    assert outs["host"][1] and not outs["device"][1]  # crops on the CPU only
-    host, device = outs["host"][0], outs["device"][0]
-    assert np.abs(host[10:20, 5:15] - 700.0).max() < 5.0 and np.abs(device[10:20, 5:15] - 700.0).max() < 5.0
-    assert np.abs(host - device).max() < 1.0  # the crops' own CG step sizes apart, the same frame
+    if path == "device":
+        monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
+    regions = []
+    real = frame_module.run_later_layers
+    monkeypatch.setattr(frame_module, "run_later_layers",
+                        lambda layers, state, obs, fresh: regions.append(fresh.clone()) or real(layers, state, obs,
+                                                                                               fresh))
+    model = DepthRestorer(num_layers=3, block_matching={"search_window": 7, "k": 6, "match_layers": (0,)})
+    s = StreamRestorer(model, {"layers": 1, "max_frames": 3})
+    for t in range(5):
+        s.step(_noisy(gt, t), rgb)
+    before = s.state.depth.clone()
+    out = s.step(moved, rgb2, return_details=True)
+    monkeypatch.undo()
+    return out, regions[-1][0, 0].numpy(), before[0, 0].numpy()
+
+
+def test_the_later_layers_update_the_fresh_pixels_alone_the_same_on_every_path(monkeypatch):
+    """A moved object's pixels get every layer and take its depth; with the kernels computing only what the fresh
+    pixels read (the CPU) or everything (the device path, a GPU's), the frame is the same up to round-off."""
+    outs = {path: _moved_object_after_static_frames(monkeypatch, path) for path in ("host", "device")}
+    (host, fresh, _), (device, fresh_d, _) = outs["host"], outs["device"]
+    assert np.array_equal(fresh, fresh_d) and fresh[10:20, 5:15].all() and 0 < fresh.mean() < 0.5
+    for r in (host, device):
+        assert np.abs(r.depth[10:20, 5:15] - 700.0).max() < 5.0
+    assert np.abs(host.depth - device.depth).max() < 1e-3
+
+
+def test_a_later_layer_with_an_update_region_holds_every_other_pixel():
+    """``Observation.update_region``: the layer's x-update solves for the region alone and every other pixel keeps
+    the state it came in with, bit for bit; in the region the values move."""
+    gt, rgb = _scene()
+    m = small_model().eval()
+    seen = {}
+
+    def spy(layer, args, out):
+        state, obs = args
+        if obs.update_region is not None:
+            seen["pair"] = (state, obs.update_region, out)
+    hooks = [layer.register_forward_hook(spy) for layer in m.layers]
+    s = StreamRestorer(m, {"layers": 1, "max_frames": 3})
+    for t in range(5):
+        s.step(_noisy(gt, t), rgb)
+    moved = _noisy(gt, 9).astype(np.float32)
+    moved[10:20, 5:15] = 700.0
+    rgb2 = rgb.copy()
+    rgb2[:, 10:20, 5:15] = 0.9
+    s.step(moved, rgb2)
+    for h in hooks:
+        h.remove()
+    state, region, out = seen["pair"]
+    assert 0 < region.float().mean() < 0.5
+    for name in ("x", "z", "w", "e", "alpha", "q", "confidence"):
+        before, after = getattr(state, name), getattr(out, name)
+        outside = ~region.expand_as(after)
+        assert torch.equal(after[outside], before.to(after)[outside]), name
+    assert (out.x - state.x)[region].abs().max() > 0
 
 
 def test_change_test_sees_motion_and_ignores_noise_and_outliers():
@@ -760,9 +798,9 @@ def test_the_singular_gate_also_reads_the_pixels_measured_in_the_frame_alone(mon
     seen = []
     forward = stages.SingularDetector.forward
 
-    def spy(self, obs, x, matches):
+    def spy(self, obs, x, matches, held=None):
         seen.append(None if obs.gate_region is None else obs.gate_region.clone())
-        return forward(self, obs, x, matches)
+        return forward(self, obs, x, matches, held)
 
     monkeypatch.setattr(stages.SingularDetector, "forward", spy)
     gt, rgb = _scene()

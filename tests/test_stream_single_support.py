@@ -52,10 +52,10 @@ def detector_sees(monkeypatch) -> list:
     seen = []
     forward = stages.SingularDetector.forward
 
-    def spy(self, obs, x, matches):
+    def spy(self, obs, x, matches, held=None):
         u = obs.untrusted
         seen.append(None if u is None else (u.clone(), obs.gate_region.clone(), obs.supported.clone()))
-        return forward(self, obs, x, matches)
+        return forward(self, obs, x, matches, held)
 
     monkeypatch.setattr(stages.SingularDetector, "forward", spy)
     return seen

@@ -148,11 +148,20 @@ class UnrolledLayer(nn.Module):
         for term in terms:
             term.system(step, obs, system)
         x = self.linear_solver(obs, step.q, system.mu(), system.rhs, s.x, diag=system.diag)
-        return replace(s, x=x, z=step.z, w=step.w, e=step.e, alpha=step.alpha, q=step.q, confidence=step.confidence,
-                       matches=step.matches, clean=step.clean)
+        maps = dict(z=step.z, w=step.w, e=step.e, alpha=step.alpha, q=step.q, confidence=step.confidence)
+        if obs.update_region is not None:  # the other pixels keep their state (x already: the solver fixed it)
+            maps = {k: _held(obs.update_region, v, getattr(s, k)) for k, v in maps.items()}
+        return replace(s, x=x, matches=step.matches, clean=step.clean, **maps)
 
     def extra_repr(self) -> str:
         return f"index={self.index}, " + ", ".join(f"{k}={v:.3g}" for k, v in self.values().items())
+
+
+def _held(region: torch.Tensor, new, old):
+    """``new`` in ``region``, ``old`` elsewhere (``new`` where there is no ``old``)."""
+    if new is None or old is None:
+        return new
+    return torch.where(region, new, old.to(new))
 
 
 def _denoise_weights(m: LayerMultipliers, tv_scale, factor: int, weights: tuple) -> tuple:

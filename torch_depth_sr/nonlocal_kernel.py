@@ -28,14 +28,15 @@ _CHUNK = 256  # pixels per chunk: the chunk's (k, chunk) scratch stays in a core
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
+def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, region, alpha, stats):
     """α and the statistics of pixels ``[t0, t1)`` of the flattened batch.
 
     ``x`` (B, HW), ``g`` (B, 2, HW), ``idx``/``wt`` (B, k, HW) → ``alpha`` (B, 2, HW), ``stats`` (B, 3, HW):
     x̄, the weighted variance and the squared centroid offset. With ``ridge > 0`` x̄ is the value at the pixel
     of the plane fitted to the matched centres (weighted least squares, ridge on the slope) and the variance
     that of the residuals (see ``nonlocal_prior.nonlocal_terms``). ``g`` and ``alpha`` have 0 channels when α is
-    not wanted.
+    not wanted. ``region`` (B, HW) uint8: only its pixels are computed (the others' outputs are left as they are);
+    0 columns: every pixel.
 
     The pixels go in chunks, each statistic a loop over the chunk's pixels inside a loop over the k matches,
     without branches, so that LLVM runs it on vectors of pixels; every pixel's sums are taken in the order of
@@ -48,6 +49,7 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
     hw = idx.shape[2]
     with_alpha = g.shape[1] == 2
     with_range = range_sigma.shape[1] > 0
+    with_region = region.shape[1] > 0
     inv_w = 1.0 / width
     size = _CHUNK
     xm = np.empty((k, size))  # the chunk's matched values, offsets and weights, read once
@@ -62,6 +64,14 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
         n = t // hw
         i0 = t - n * hw
         c = min(size, t1 - t, hw - i0)
+        if with_region:  # the run of region pixels that starts here, or the next pixel
+            if region[n, i0] == 0:
+                t += 1
+                continue
+            run = 1
+            while run < c and region[n, i0 + run] != 0:
+                run += 1
+            c = run
         xn = x[n]
         xc = xn[i0:i0 + c]
         rsn = range_sigma[n, i0:i0 + c] if with_range else xc
@@ -161,7 +171,8 @@ def _pixels(t0, t1, x, g, idx, wt, width, ridge, range_sigma, alpha, stats):
 
 
 def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: torch.Tensor, weight: torch.Tensor,
-                       ridge: float = 0.0, range_sigma: Optional[torch.Tensor] = None
+                       ridge: float = 0.0, range_sigma: Optional[torch.Tensor] = None,
+                       region: Optional[torch.Tensor] = None
                        ) -> tuple[Optional[torch.Tensor], torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(α or None, x̄, variance, squared centroid offset)`` of CPU float tensors, without gradient.
 
@@ -171,6 +182,7 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: t
         ridge: > 0 fits a plane to the matched centres (see :func:`_pixels`); 0 takes their weighted mean.
         range_sigma: None, or a ``(B,1,H,W)`` map (or broadcastable) of the range σ that also weighs each centre
             of the value prior by exp(−(x_j − x_i)²/2σ²) (0 = not there).
+        region: None, or a ``(B,1,H,W)`` bool map: the outputs are computed at its pixels only, 0 elsewhere.
 
     Returns:
         α ``(B,2,H,W)`` (None without ``grad_x``), then x̄, variance, offset², each ``(B,1,H,W)``, in ``x``'s dtype.
@@ -185,10 +197,14 @@ def nonlocal_terms_cpu(x: torch.Tensor, grad_x: Optional[torch.Tensor], index: t
     # per-pixel range σ of the value prior's centre weights (0 = none), or no channel at all
     rsn = (as_numpy(range_sigma.to(x.dtype).expand(b, 1, h, w), (b, h * w), np_dt) if range_sigma is not None
            else np.zeros((b, 0), np_dt))
-    alpha = np.empty((b, gn.shape[1], h * w), dtype=np_dt)
-    stats = np.empty((b, 3, h * w), dtype=np_dt)
+    if region is None:
+        reg, shares, alloc = np.zeros((b, 0), np.uint8), 1, np.empty
+    else:  # a region's pixels lie where the scene changed, not spread evenly: more shares balance the threads
+        reg, shares, alloc = as_numpy(region, (b, h * w), np.uint8), 8, np.zeros
+    alpha = alloc((b, gn.shape[1], h * w), dtype=np_dt)
+    stats = alloc((b, 3, h * w), dtype=np_dt)
     # one equal share of the pixels per thread (_pixels releases the GIL; few hand-offs), or on the calling thread
-    run_range(_pixels, b * h * w, xn, gn, idxn, wn, w, float(ridge), rsn, alpha, stats)
+    run_range(_pixels, b * h * w, xn, gn, idxn, wn, w, float(ridge), rsn, reg, alpha, stats, shares=shares)
     st = torch.from_numpy(stats).view(b, 3, h, w)
     a = torch.from_numpy(alpha).view(b, 2, h, w) if grad_x is not None else None
     return a, st[:, 0:1], st[:, 1:2], st[:, 2:3]

@@ -131,7 +131,8 @@ def _kernel():
 def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: BlockMatches, *,
                    value_weight: float = 0.0, max_var: float = 0.25, max_offset: float = 2.5,
                    plane_ridge: float = 0.0, range_sigma: Union[float, torch.Tensor, None] = None,
-                   backend: str = "auto") -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
+                   region: Optional[torch.Tensor] = None, backend: str = "auto"
+                   ) -> Tuple[Optional[torch.Tensor], Optional[torch.Tensor], Optional[torch.Tensor]]:
     """α, and the value prior ``(W, x̄)``, from one read of the matches.
 
     Args:
@@ -145,6 +146,8 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
         range_sigma: None, or a float or ``(B,1,H,W)`` map r: each centre of the value prior is also weighed by
             exp(−(x_j − x_i)²/2r²) (an edge-stopping range kernel on the current estimate, as the rolling-guidance
             filter's) where r > 0; α keeps the match weights.
+        region: None, or a ``(B,1,H,W)`` bool map of the pixels whose outputs are wanted: the numba kernel computes
+            those alone (0 elsewhere), the torch path every pixel.
         backend: ``"auto"`` (the numba kernel for float CPU tensors when no gradient is needed, else torch),
             ``"torch"``.
 
@@ -178,7 +181,7 @@ def nonlocal_terms(x: torch.Tensor, grad_x: Optional[torch.Tensor], matches: Blo
     if backend == "auto" and not tracked and host_path(x.device) and x.dtype in (torch.float32, torch.float64):
         kernel = _kernel()
     if kernel is not None:
-        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight, plane_ridge, range_sigma)
+        alpha, xbar, var, offset2 = kernel(x, grad_x, matches.index, matches.weight, plane_ridge, range_sigma, region)
     else:
         w = matches.weight.to(x.dtype)  # (B, k, H, W)
         planes = x if grad_x is None else torch.cat([grad_x, x], dim=1)  # one gather for α and x̄

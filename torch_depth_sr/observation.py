@@ -63,6 +63,9 @@ class Observation:
     # (B,1,h,w) bool: measurements the singular test does not trust, whatever it finds (a stream's measurements of
     # this frame alone without the support of their neighbours, ``StreamConfig.single_support``); None: none
     untrusted: Optional[torch.Tensor] = None
+    # (B,1,H,W) bool: the pixels a layer updates; every other pixel keeps the state it comes in with (the x-update
+    # solves for these pixels alone, the others fixed; the stages compute what these pixels read). None: every pixel
+    update_region: Optional[torch.Tensor] = None
     percentiles: Optional[torch.Tensor] = None  # (B,2) p1 and p99 of the measured depth (the scale policy's)
 
     @property

@@ -22,7 +22,7 @@ matched centre is credible, the statistics use all ``k`` centres with their orig
 from __future__ import annotations
 
 import math
-from typing import Tuple, Union
+from typing import Optional, Tuple, Union
 
 import torch
 
@@ -30,6 +30,7 @@ from ._checks import check_4d, check_per_sample, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError
 from .native import cpu_kernel, host_kernel, host_path
+from .window_max import max_filter
 
 __all__ = ["detect_singular", "neighbour_support", "line_support"]
 
@@ -174,6 +175,18 @@ def _numba_kernel():
     return cpu_kernel("singular_kernel", "singular_rounds_cpu")
 
 
+def _rounds_needed(region: torch.Tensor, rounds: int, reach: int) -> torch.Tensor:
+    """(B,1,H,W) uint8: how many rounds each pixel takes part in for ``region``'s result. Round ``r`` of a pixel reads
+    round ``r − 1`` at its matched centres, within ``reach`` px: ``rounds`` in the region, one fewer per ``reach`` px
+    farther from it."""
+    need = region.to(torch.uint8)
+    grown = region.to(torch.float32)
+    for _ in range(rounds - 1):
+        grown = max_filter(grown, 2 * reach + 1)
+        need = need + (grown > 0).to(torch.uint8)
+    return need
+
+
 def _singular_torch(y0, obs, xv, matches: BlockMatches, floor, tau: float, rounds: int, early_exit=None):
     """The test in tensor operations (any device; the reference of the numba kernel).
 
@@ -215,6 +228,8 @@ def detect_singular(
     rounds: int = 3,
     *,
     return_confidence: bool = False,
+    region: Optional[torch.Tensor] = None,
+    reach: int = 0,
     backend: str = "auto",
 ) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
     """Credibility mask ``Q`` (1 = credible, 0 = singular or missing) from the matched blocks.
@@ -230,6 +245,10 @@ def detect_singular(
         rounds: number of test rounds (≥ 1). Once a round changes no pixel's ``Q`` the later ones would
             change nothing either; on the CPU the test then stops early.
         return_confidence: also return the soft confidence ``P`` (0 at missing pixels).
+        region: None, or a ``(B, 1, H, W)`` bool map of the pixels whose ``Q`` and ``P`` are wanted; elsewhere they
+            are left unspecified. The numba kernel then computes a round only where a later round or the result
+            reads it: the region, and in round ``r`` the pixels within ``(rounds − 1 − r) · reach`` px of it.
+        reach: how far from a pixel its matched centres lie, in px (the search radius): with ``region``.
         backend: ``"numba"`` (the CPU kernel of :mod:`~torch_depth_sr.singular_kernel`), ``"torch"`` (tensor
             operations, any device) or ``"auto"`` (numba for float CPU tensors when it is installed and
             ``TORCH_DEPTH_SR_NO_NUMBA`` is unset, else torch). Both give the same ``Q`` and ``P`` up to
@@ -277,7 +296,8 @@ def detect_singular(
             raise DepthSRError("backend='numba' needs CPU float32/float64 tensors and numba (got tensors on "
                                f"{y0.device} in {dt}; numba {'missing or disabled' if _numba_kernel() is None else 'loaded'}).")
         if kernel is not None:
-            qf, p = kernel(y0, obs, xv, matches.index, matches.weight, floor, float(tau), rounds)
+            need = None if region is None else _rounds_needed(region, rounds, reach)
+            qf, p = kernel(y0, obs, xv, matches.index, matches.weight, floor, float(tau), rounds, need)
         else:
             qf, p = _singular_torch(y0, obs, xv, matches, floor, float(tau), rounds)
     return (qf, p) if return_confidence else qf

@@ -17,6 +17,7 @@ lies within round-off of ``τ``. Compiled by LLVM at first use and cached on dis
 from __future__ import annotations
 
 import math
+from typing import Optional
 
 import numpy as np
 import torch
@@ -28,18 +29,26 @@ __all__ = ["singular_rounds_cpu", "support_cpu"]
 
 
 @njit(cache=True, fastmath=False, nogil=True)
-def _pixels(i0, i1, first, y0, obs, x, idx, w0, floor_, tau, tiny, q_old, q_new, p, dirty_old, dirty_new):
-    """Q and P of pixels ``[i0, i1)`` of one sample in one round; returns how many changed Q.
+def _pixels(i0, i1, rnd, y0, obs, x, idx, w0, floor_, tau, tiny, need, q_old, q_new, p, dirty_old, dirty_new):
+    """Q and P of pixels ``[i0, i1)`` of one sample in round ``rnd``; returns how many changed Q.
 
     ``y0, obs, x, q, p, dirty``: (HW,); ``idx, w0``: (k, HW). After the first round a pixel none of whose
     matched centres changed Q in the previous round keeps its Q and P: its statistics would be the same.
+    ``need`` (HW,) uint8: a pixel is computed in rounds ``rnd < need`` only, and keeps its Q and P after them; 0
+    entries: every pixel in every round.
     """
+    first = rnd == 0
+    with_need = need.shape[0] > 0
     k = idx.shape[0]
     xm = np.empty(k)  # the pixel's matched values and renormalised weights, read once
     wm = np.empty(k)
     changed = 0
     for ii in range(i0, i1):
         i = np.uint64(ii)  # unsigned: no wraparound test on each access (numba's, for negative signed indices)
+        if with_need and need[i] <= rnd:
+            q_new[i] = q_old[i]
+            dirty_new[i] = 0
+            continue
         if not first:
             stale = 0
             for m in range(k):
@@ -186,8 +195,9 @@ def support_cpu(y: torch.Tensor, observed: torch.Tensor, tol: torch.Tensor, supp
     return torch.from_numpy(out).view(b, 1, h, w)
 
 
-def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, q, p):
-    """All rounds for every sample (arrays (B, HW) and (B, k, HW)); ``q`` holds Q⁰ on entry, Q on exit.
+def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, need, q, p):
+    """All rounds for every sample (arrays (B, HW) and (B, k, HW)); ``q`` holds Q⁰ on entry, Q on exit; ``need``
+    (B, HW) or (B, 0) as :func:`_pixels` reads it.
 
     The loop over samples and rounds is Python; each round is :func:`_pixels` over equal shares of the pixels on
     torch's thread count (it releases the GIL), or over all of them on the calling thread with one thread. A compiled
@@ -197,11 +207,12 @@ def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, q, p):
     q_next = np.empty(hw, dtype=q.dtype)
     dirty = np.zeros(hw, dtype=np.uint8)
     dirty_next = np.zeros(hw, dtype=np.uint8)
+    shares = 1 if need.shape[1] == 0 else 8  # a region's pixels are not spread evenly: more shares balance threads
     for n in range(b):
         for r in range(rounds):
-            args = (r == 0, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, q[n], q_next, p[n], dirty,
+            args = (r, y0[n], obs[n], x[n], idx[n], w0[n], floor_[n], tau, tiny, need[n], q[n], q_next, p[n], dirty,
                     dirty_next)
-            changed = sum(run_range(_pixels, hw, *args))  # one equal share of the pixels per thread
+            changed = sum(run_range(_pixels, hw, *args, shares=shares))  # equal shares of the pixels per thread
             q[n] = q_next
             dirty, dirty_next = dirty_next, dirty
             if changed == 0:
@@ -209,14 +220,16 @@ def _rounds(y0, obs, x, idx, w0, floor_, tau, tiny, rounds, q, p):
 
 
 def singular_rounds_cpu(y0: torch.Tensor, obs: torch.Tensor, x: torch.Tensor, index: torch.Tensor,
-                        weight: torch.Tensor, floor: torch.Tensor, tau: float, rounds: int
-                        ) -> tuple[torch.Tensor, torch.Tensor]:
+                        weight: torch.Tensor, floor: torch.Tensor, tau: float, rounds: int,
+                        need: Optional[torch.Tensor] = None) -> tuple[torch.Tensor, torch.Tensor]:
     """``(Q, P)`` of the singular test, each ``(B, 1, H, W)`` in ``y0``'s dtype, by the numba kernel.
 
     Args:
         y0: ``(B,1,H,W)`` float32/64 CPU observation, 0 where missing. ``obs``: ``(B,1,H,W)`` bool, measured.
         x: ``(B,1,H,W)`` current estimate. ``index``/``weight``: ``(B,k,H,W)`` matches and their weights.
         floor: ``(B,)`` (or broadcastable to it) σ floor; ``tau``: the threshold on P; ``rounds`` ≥ 1.
+        need: None, or ``(B,1,H,W)`` integer: a pixel takes part in the rounds ``r < need`` only and keeps the Q and
+            P of its last (Q⁰ and P = 0 where ``need`` is 0).
     """
     b, _, h, w = y0.shape
     k = index.shape[1]
@@ -229,5 +242,6 @@ def singular_rounds_cpu(y0: torch.Tensor, obs: torch.Tensor, x: torch.Tensor, in
     fl = np.ascontiguousarray(floor.detach().reshape(-1).expand(b).double().numpy())
     q = obsn.astype(np_dt)  # Q⁰ = measured (a fresh array: the inputs are never written)
     p = np.zeros((b, h * w), dtype=np_dt)
-    _rounds(y0n, obsn, xn, idxn, wn, fl, float(tau), float(np.finfo(np_dt).tiny), int(rounds), q, p)
+    nd = np.zeros((b, 0), np.uint8) if need is None else as_numpy(need.clamp(0, 255), (b, h * w), np.uint8)
+    _rounds(y0n, obsn, xn, idxn, wn, fl, float(tau), float(np.finfo(np_dt).tiny), int(rounds), nd, q, p)
     return torch.from_numpy(q).view(b, 1, h, w), torch.from_numpy(p).view(b, 1, h, w)

@@ -201,15 +201,23 @@ class SingularDetector(nn.Module):
         """The pixels every test of this forward trusts (they depend on the observation only); None = no rule."""
         return self._support(obs, self.settings)
 
-    def forward(self, obs: Observation, x: torch.Tensor,
-                matches: BlockMatches) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+    def forward(self, obs: Observation, x: torch.Tensor, matches: BlockMatches,
+                held: Optional[tuple[torch.Tensor, torch.Tensor]] = None
+                ) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """``(Q, confidence, clean)`` of ``x`` against ``obs.y``: Q and the soft confidence P(x_i) (0 at missing
         pixels) (B,1,h,w), and the gate's verdict (B,1,1,1) bool, None without a gate. ``obs.supported`` is what
-        :meth:`supported` returned; Q is 0 at ``obs.untrusted``, whatever the test and the gate say."""
+        :meth:`supported` returned; Q is 0 at ``obs.untrusted``, whatever the test and the gate say. With
+        ``obs.update_region`` the test runs for that region, and every other pixel keeps ``held`` (its incoming Q and
+        confidence), which the gate reads too."""
         c = self.settings
+        region = obs.update_region if held is not None else None
         with stage(obs.log.timings, "singular", x.device), torch.no_grad():
             q, conf = detect_singular(obs.y, x.detach(), obs.observed, matches, sigma_floor=c.sigma_floor,
-                                      tau=c.tau, rounds=c.rounds, return_confidence=True)
+                                      tau=c.tau, rounds=c.rounds, return_confidence=True, region=region,
+                                      reach=obs.block_matcher.settings.window_and_k()[obs.task][0] // 2)
+            if region is not None:
+                q = torch.where(region, q, held[0].to(q))
+                conf = torch.where(region, conf, held[1].to(conf))
             q, conf = self._trust_supported(obs, q, conf, c)
             q, clean = self._gate(obs, q, conf, c)
             q = _distrust(obs, q)
@@ -221,16 +229,25 @@ class SingularDetector(nn.Module):
 
 
 # ---- the x-update -----------------------------------------------------------------------------------
-def _neumann(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int) -> NeumannPreconditioner:
+def _neumann(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int,
+            region: Optional[torch.Tensor] = None) -> NeumannPreconditioner:
     """The preconditioner of the system with KᵀQK replaced by mean(Q)/s² (KᵀK maps a constant image to 1/s² of it)
-    and the diagonal by its mean."""
-    a = q.flatten(1).mean(1) / (scale ** 2)  # (B,)
+    and the diagonal by its mean; the means over ``region`` (the unknowns) when there is one."""
+    a = _mean(q, region) / (scale ** 2)  # (B,)
     if diag is not None:
-        a = a + diag.flatten(1).mean(1)
+        a = a + _mean(diag, region)
     return NeumannPreconditioner(a.detach(), mu.detach())
 
 
-def _no_preconditioner(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int) -> None:
+def _mean(t: torch.Tensor, region: Optional[torch.Tensor]) -> torch.Tensor:
+    if region is None:
+        return t.flatten(1).mean(1)
+    m = region.flatten(1).to(t.dtype)
+    return (t.flatten(1) * m).sum(1) / m.sum(1).clamp_min(1)
+
+
+def _no_preconditioner(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int,
+                       region: Optional[torch.Tensor] = None) -> None:
     return None
 
 
@@ -261,13 +278,25 @@ class LinearSolver(nn.Module):
             av = K.adjoint(q * K(v)) + mu * laplacian(v)
             return av if diag is None else av + diag * v
 
+        region = obs.update_region
         with stage(obs.log.timings, "cg", x0.device):
-            res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=self._preconditioner(q, diag, mu, K.scale),
-                           tol=c.tol, max_iter=self.max_iter, implicit=c.implicit_backward,
-                           params=(mu,) if mu.requires_grad else (), early_exit=self.early_exit,
-                           backward_max_iter=c.max_iter)
+            pre = self._preconditioner(q, diag, mu, K.scale, region)
+            if region is None:
+                res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=pre, tol=c.tol, max_iter=self.max_iter,
+                               implicit=c.implicit_backward, params=(mu,) if mu.requires_grad else (),
+                               early_exit=self.early_exit, backward_max_iter=c.max_iter)
+                x = res.x
+            else:  # A_RR x_R = b_R − A_RF x_F: the unknowns in the region, the other pixels fixed at x0
+                m = region.to(x0.dtype)
+                fixed = (1 - m) * x0.detach()
+                res = cg_solve(lambda v: m * apply_a(m * v), m * (rhs - apply_a(fixed)), x0=m * x0.detach(),
+                               precond=None if pre is None else (lambda r: m * pre(m * r)), tol=c.tol,
+                               max_iter=self.max_iter, implicit=c.implicit_backward,
+                               params=(mu,) if mu.requires_grad else (), early_exit=self.early_exit,
+                               backward_max_iter=c.max_iter)
+                x = m * res.x + fixed
         obs.log.cg_iterations.append(res.iterations)
-        return res.x
+        return x
 
     def extra_repr(self) -> str:
         s = self.settings

@@ -30,6 +30,7 @@ from .operators import grad_adjoint
 from .shrinkage import group_soft_threshold, soft_threshold
 from .stages import SingularDetector
 from .state import RestorationState, stage
+from .window_max import max_filter
 
 __all__ = ["GuidedPriorTerm", "LayerStep", "MatchReader", "NonlocalTerm", "OutlierTerm", "Rematch", "SingularTest",
            "System", "TVTerm", "TemporalPriorTerm", "Term", "ValuePriorTerm"]
@@ -209,9 +210,12 @@ class MatchReader(nn.Module):
     def forward(self, step: LayerStep, obs: Observation) -> None:
         x, clean, vp = step.state.x, step.state.clean, self.gates
         with stage(obs.log.timings, "nonlocal", x.device):
+            # with an update region, the x-update reads α one pixel beyond it (Dᵀ) and W, x̄ in it: the kernel
+            # computes those pixels alone
+            region = None if obs.update_region is None else max_filter(obs.update_region.to(x.dtype), 3) > 0
             alpha, diag, target = nonlocal_terms(
                 x, self._gradient(step), step.matches, value_weight=self.value_weight, max_var=vp.var,
-                max_offset=vp.offset, plane_ridge=vp.ridge, range_sigma=self._range(clean))
+                max_offset=vp.offset, plane_ridge=vp.ridge, range_sigma=self._range(clean), region=region)
         step.alpha = self._alpha(alpha, step)
         step.value_weight, step.value_target = self._weight(diag, clean), target
 
@@ -235,7 +239,9 @@ class SingularTest(nn.Module):
         self.detector = SingularDetector(settings)
 
     def forward(self, step: LayerStep, obs: Observation) -> None:
-        step.q, step.confidence, step.clean = self.detector(obs, step.state.x, step.matches)
+        s = step.state
+        held = None if s.q is None or s.confidence is None else (s.q, s.confidence)
+        step.q, step.confidence, step.clean = self.detector(obs, s.x, step.matches, held)
 
 
 # ---- what the settings choose, once, when a term is built -----------------------------------------------

@@ -412,8 +412,8 @@ class StreamConfig(Group):
     decays by ``hole_decay`` per frame without one; a hole with evidence of at least ``fill_evidence`` is filled
     from the past and counts as a confident fill. With ``reuse_matches`` the pixels whose matches lie in static
     parts keep the previous frame's matches. A frame with a previous frame runs the model's first ``layers`` layers on
-    the whole frame and the others on crops around the pixels that changed or whose static run is younger than
-    ``max_frames`` (:mod:`~torch_depth_sr.stream.crop_layers`; None: every layer everywhere). With ``keep_scale`` a
+    the whole frame and the others on the pixels that changed or whose static run is younger than ``max_frames``
+    alone (:mod:`~torch_depth_sr.stream.later_layers`; None: every layer everywhere). With ``keep_scale`` a
     frame is normalised with the previous frame's scale policy (offset, scale, noise σ̂, grid step) while at least half
     of the previous frame was static, instead of estimating them again. ``join_cap`` bounds the noise unit a
     measurement is compared with to its run's mean (joined, held out or confirmed), in units of the change test's

@@ -18,9 +18,9 @@ confidence, the local noise spread; the colour image and the last matches. The f
    confident past (evidence ≥ ``fill_evidence``), or the previous frame's verdict while the pixel stays a hole of
    unchanged colour, else the frame's own (no pixel toggles on noise, no gap is bridged that the frame would not);
 3. ``run_layers`` — the layers: with a previous frame and ``settings.layers = n``, the first ``n`` on the whole
-   frame and the others only where the scene changed or the static run is younger than ``max_frames``, on crops
-   around those pixels (:mod:`~torch_depth_sr.stream.crop_layers`; None, the default: every layer on the whole
-   frame);
+   frame and the others only where the scene changed or the static run is younger than ``max_frames``: they update
+   those pixels alone, every other pixel held at its state (:mod:`~torch_depth_sr.stream.later_layers`; None, the
+   default: every layer on the whole frame);
 4. ``post`` — the post-steps, except on static pixels with a full run whose layers' value stayed within
    ``settings.hold`` of the value their previous output came from: those keep that output
    (:mod:`~torch_depth_sr.stream.post_hold`);
@@ -47,7 +47,7 @@ from ..observation import Observation, ScalePolicy
 from ..stages import supported_pixels
 from ..state import RestorationState
 from .change import change_test, local_spread, remembered_spread
-from .crop_layers import run_later_layers
+from .later_layers import run_later_layers
 from .matching import StreamMatcher, dilate, search_radius
 from .post_hold import run_post_steps
 from .runs import grow_runs, join_runs
@@ -219,7 +219,7 @@ class StreamFrame:
             state = layer(state, obs)
         if len(first) < len(layers):
             # the rest of the layers where the scene changed or the static run has not yet its full mean
-            # (max_frames measurements): on crops around those pixels (crop_layers)
+            # (max_frames measurements): those pixels alone (later_layers)
             state = run_later_layers(layers[len(first):], state, obs, self.fresh)
         return state
 

@@ -4,7 +4,7 @@ On sensor input a cold frame spends about as long in its post-steps as in its la
 gate switch the edge steps on, and the edge snap and the edge refit sort a colour window at every pixel near a depth
 edge (:mod:`~torch_depth_sr.edge_snap`; 180–210 ms of a 480 ms frame at 640×480 on a 2-core CPU). In a stream, a
 static pixel whose run has its full mean (``fresh`` False: the pixels the later layers leave alone,
-:mod:`~torch_depth_sr.stream.crop_layers`) and whose layers' value stayed within ``StreamConfig.hold`` noise units of
+:mod:`~torch_depth_sr.stream.later_layers`) and whose layers' value stayed within ``StreamConfig.hold`` noise units of
 the value its previous output was computed from is *steady*: it keeps that output. The edge steps act on the other
 pixels only, which the CPU kernels compute alone. The refiner runs on the whole frame (a few convolutions) and is
 kept at those pixels only. The do-no-harm bounds (the steps with ``bounds_output``: the band,

@@ -39,7 +39,10 @@ from fresh_seeds import KEYS, LIMITS, restored_frames  # noqa: E402  (the ninete
 from tried_fill_from_raw import VARIANTS as FILL_VARIANTS  # noqa: E402  (the twenty-second stop's fill variants)
 from tried_fill_from_raw import patch as fill_patch  # noqa: E402
 
-import torch_depth_sr.stream.crop_layers as crop_layers  # noqa: E402
+try:  # the later layers' module until the twenty-seventh stop (its host_path: "whole" patches it)
+    import torch_depth_sr.stream.crop_layers as crop_layers  # noqa: E402
+except ImportError:
+    import torch_depth_sr.stream.later_layers as crop_layers  # noqa: E402
 import torch_depth_sr.stream.frame as frame  # noqa: E402
 from torch_depth_sr import restore_depth  # noqa: E402
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences  # noqa: E402
