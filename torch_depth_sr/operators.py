@@ -40,6 +40,7 @@ __all__ = [
     "grad",
     "grad_adjoint",
     "laplacian",
+    "laplacian_diagonal",
 ]
 
 
@@ -147,6 +148,31 @@ def laplacian(x: torch.Tensor) -> torch.Tensor:
     check_4d(x, "x")
     check_floating(x, "x")
     return _laplacian(x)
+
+
+def laplacian_diagonal(like: torch.Tensor) -> torch.Tensor:
+    """The diagonal of :func:`laplacian` for images of ``like``'s size, dtype and device, ``(1, 1, H, W)``: each
+    pixel's count of in-image 4-neighbours (4 inside, 3 on an edge, 2 at a corner).
+
+    Examples:
+        >>> laplacian_diagonal(torch.zeros(1, 1, 3, 4))[0, 0]
+        tensor([[2., 3., 3., 2.],
+                [3., 4., 4., 3.],
+                [2., 3., 3., 2.]])
+    """
+    h, w = like.shape[-2:]
+    return _laplacian_diagonal(h, w, like.dtype, like.device)
+
+
+@functools.lru_cache(maxsize=8)
+def _laplacian_diagonal(h: int, w: int, dtype: torch.dtype, device: torch.device) -> torch.Tensor:
+    rows = torch.full((h,), 2.0, dtype=dtype, device=device)
+    cols = torch.full((w,), 2.0, dtype=dtype, device=device)
+    rows[0] -= 1
+    rows[-1] -= 1
+    cols[0] -= 1
+    cols[-1] -= 1
+    return (rows[:, None] + cols[None, :]).view(1, 1, h, w)
 
 
 # --------------------------------------------------------------------------------------------

@@ -18,9 +18,9 @@ from torch import nn
 from .block_matching import BlockMatches, block_match, refine_matches
 from .block_matching._common import candidates_everywhere
 from .config import BlockMatchingConfig, SingularConfig, SolverConfig
-from .native import on_device
+from .native import host_path, on_device
 from .observation import Observation
-from .operators import laplacian
+from .operators import laplacian, laplacian_diagonal
 from .singular import detect_singular, neighbour_support, supported_or_line
 from .solvers.dct import NeumannPreconditioner
 from .solvers.implicit import cg_solve
@@ -229,25 +229,33 @@ class SingularDetector(nn.Module):
 
 
 # ---- the x-update -----------------------------------------------------------------------------------
-def _neumann(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int,
-            region: Optional[torch.Tensor] = None) -> NeumannPreconditioner:
+def _neumann(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, K) -> NeumannPreconditioner:
     """The preconditioner of the system with KᵀQK replaced by mean(Q)/s² (KᵀK maps a constant image to 1/s² of it)
-    and the diagonal by its mean; the means over ``region`` (the unknowns) when there is one."""
-    a = _mean(q, region) / (scale ** 2)  # (B,)
+    and the diagonal by its mean."""
+    a = q.flatten(1).mean(1) / (K.scale ** 2)  # (B,)
     if diag is not None:
-        a = a + _mean(diag, region)
+        a = a + diag.flatten(1).mean(1)
     return NeumannPreconditioner(a.detach(), mu.detach())
 
 
-def _mean(t: torch.Tensor, region: Optional[torch.Tensor]) -> torch.Tensor:
-    if region is None:
-        return t.flatten(1).mean(1)
-    m = region.flatten(1).to(t.dtype)
-    return (t.flatten(1) * m).sum(1) / m.sum(1).clamp_min(1)
+def _region_diagonal(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, K,
+                     m: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
+    """A region's preconditioner (``m`` its 0/1 mask): the operator's diagonal, KᵀQK by what it makes of a constant
+    image (Q itself when K = I) and DᵀD by each pixel's count of in-image 4-neighbours. The Neumann preconditioner
+    solves over the whole frame, 13 ms a layer at 640×480 for a region of a tenth of it. A sample whose region is
+    the whole frame keeps the Neumann preconditioner: its layer is the model's own."""
+    d = K.adjoint(q * K(torch.ones_like(m))) + mu.detach() * laplacian_diagonal(m)
+    if diag is not None:
+        d = d + diag
+    inverse = (m / d.clamp_min(torch.finfo(d.dtype).tiny)).detach()
+    whole = (m.flatten(1).amin(1) > 0).view(-1, 1, 1, 1)  # (B,1,1,1)
+    if host_path(m.device) and not bool(whole.any()):
+        return lambda r: inverse * r
+    neumann = _neumann(q, diag, mu, K)
+    return lambda r: torch.where(whole, neumann(r), inverse * r)
 
 
-def _no_preconditioner(q: torch.Tensor, diag: Optional[torch.Tensor], mu: torch.Tensor, scale: int,
-                       region: Optional[torch.Tensor] = None) -> None:
+def _no_preconditioner(*args) -> None:
     return None
 
 
@@ -258,8 +266,10 @@ class LinearSolver(nn.Module):
     prior's β(1−Q), the value prior's weights; None when no term has one). With a fixed iteration count for the layer
     (``settings.iterations(index)``) CG runs that many iterations (a sample that reaches ``settings.tol`` earlier
     stops changing) and never makes the host wait for the device; without one it iterates until every sample
-    reaches ``settings.tol`` (at most ``settings.max_iter``). Appends the ``(B,)`` iteration counts to
-    ``obs.log.cg_iterations`` and times itself as ``"cg"``."""
+    reaches ``settings.tol`` (at most ``settings.max_iter``). With ``obs.update_region`` it solves for the region's
+    pixels alone, every other pixel fixed at ``x0``, preconditioned by the operator's diagonal (a sample whose region
+    is the whole frame as without one). Appends the ``(B,)`` iteration counts to ``obs.log.cg_iterations`` and times
+    itself as ``"cg"``."""
 
     def __init__(self, settings: SolverConfig, index: int):
         super().__init__()
@@ -268,6 +278,7 @@ class LinearSolver(nn.Module):
         self.max_iter = settings.max_iter if fixed is None else fixed
         self.early_exit = fixed is None
         self._preconditioner = _neumann if settings.precondition else _no_preconditioner
+        self._region_preconditioner = _region_diagonal if settings.precondition else _no_preconditioner
 
     def forward(self, obs: Observation, q: torch.Tensor, mu: torch.Tensor, rhs: torch.Tensor, x0: torch.Tensor,
                 diag: Optional[torch.Tensor] = None) -> torch.Tensor:
@@ -280,17 +291,17 @@ class LinearSolver(nn.Module):
 
         region = obs.update_region
         with stage(obs.log.timings, "cg", x0.device):
-            pre = self._preconditioner(q, diag, mu, K.scale, region)
             if region is None:
-                res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=pre, tol=c.tol, max_iter=self.max_iter,
-                               implicit=c.implicit_backward, params=(mu,) if mu.requires_grad else (),
-                               early_exit=self.early_exit, backward_max_iter=c.max_iter)
+                res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=self._preconditioner(q, diag, mu, K), tol=c.tol,
+                               max_iter=self.max_iter, implicit=c.implicit_backward,
+                               params=(mu,) if mu.requires_grad else (), early_exit=self.early_exit,
+                               backward_max_iter=c.max_iter)
                 x = res.x
             else:  # A_RR x_R = b_R − A_RF x_F: the unknowns in the region, the other pixels fixed at x0
                 m = region.to(x0.dtype)
                 fixed = (1 - m) * x0.detach()
                 res = cg_solve(lambda v: m * apply_a(m * v), m * (rhs - apply_a(fixed)), x0=m * x0.detach(),
-                               precond=None if pre is None else (lambda r: m * pre(m * r)), tol=c.tol,
+                               precond=self._region_preconditioner(q, diag, mu, K, m), tol=c.tol,
                                max_iter=self.max_iter, implicit=c.implicit_backward,
                                params=(mu,) if mu.requires_grad else (), early_exit=self.early_exit,
                                backward_max_iter=c.max_iter)
