@@ -4,13 +4,14 @@ With ``StreamConfig.layers = n`` a frame with a past runs the model's first ``n`
 pixel whose run has its full mean keeps that (the running mean and the temporal prior have done the later layers' work
 there: ``docs/measurements/issue28-stream/layers_2006.txt``). A changed pixel has neither, and a young run too little
 of the mean: these *fresh* pixels get the remaining layers. Each of those layers runs with the fresh pixels as its
-``Observation.update_region``: its x-update solves for them alone, with every other pixel fixed at its value after the
-first layers, and every other pixel keeps its state. On the CPU the singular test and the read of the matches are
-computed only where the fresh pixels read them (:func:`~torch_depth_sr.singular.detect_singular`'s ``region``), so a
-layer costs the whole frame's element-wise work and CG iteration plus the kernels on about the fresh pixels.
+``Observation.update_region``: its x-update solves for them alone (preconditioned by the operator's diagonal), with
+every other pixel fixed at its value after the first layers, and every other pixel keeps its state. On the CPU the
+singular test and the read of the matches are computed only where the fresh pixels read them
+(:func:`~torch_depth_sr.singular.detect_singular`'s ``region``), so a layer costs the whole frame's element-wise work
+plus the kernels on about the fresh pixels.
 
 This replaced layers run on rectangles around the fresh pixels, padded by what the layers read: at 640×480 the
-rectangles covered 62–69 % of a moving frame, and the fixed boundary gives the same accuracy as the padding
+rectangles covered 62–69 % of a moving frame, and the fixed boundary came out more accurate than the padding
 (``docs/measurements/issue28-stream/twenty-seventh-stop/``).
 """
 from __future__ import annotations
