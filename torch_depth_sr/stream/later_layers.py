@@ -21,7 +21,6 @@ from dataclasses import replace
 import torch
 from torch import nn
 
-from ..native import host_path
 from ..observation import Observation
 from ..state import RestorationState
 
@@ -31,15 +30,14 @@ __all__ = ["run_later_layers"]
 def run_later_layers(layers: nn.ModuleList, state: RestorationState, obs: Observation,
                      fresh: torch.Tensor) -> RestorationState:
     """``layers`` updating the ``fresh`` pixels (B,1,H,W) bool of ``state`` alone."""
-    region = fresh
-    if host_path(fresh.device):  # (off the CPU no host read: the layers hold what the region leaves out)
-        if not bool(fresh.any()):
-            return state
-        if bool(fresh.all()):
-            region = None  # every pixel: the layers as in a frame on its own
     if len(layers) == 0:
         return state
-    part = replace(obs, update_region=region)
+    # one host read, which spares work on any device: no fresh pixel skips the layers (a settled static scene), every
+    # pixel fresh runs them as in a frame on its own (a moving camera)
+    some, every = torch.stack([fresh.any(), fresh.all()]).tolist()
+    if not some:
+        return state
+    part = replace(obs, update_region=None if every else fresh)
     for layer in layers:
         state = layer(state, part)
     return state
