@@ -100,6 +100,8 @@ def test_errors():
         detect_singular(y, x, obs, m, sigma_floor=0.5, tau=1.5)
     with pytest.raises(DepthSRError, match="rounds must be"):
         detect_singular(y, x, obs, m, sigma_floor=0.5, rounds=0)
+    with pytest.raises(DepthSRError, match="reach must be"):
+        detect_singular(y, x, obs, m, sigma_floor=0.5, region=obs > 0)
     with pytest.raises(ShapeError, match="matches"):
         detect_singular(y[..., :20, :], x[..., :20, :], obs[..., :20, :], m, sigma_floor=0.5)
 

@@ -229,7 +229,7 @@ def detect_singular(
     *,
     return_confidence: bool = False,
     region: Optional[torch.Tensor] = None,
-    reach: int = 0,
+    reach: Optional[int] = None,
     backend: str = "auto",
 ) -> Union[torch.Tensor, Tuple[torch.Tensor, torch.Tensor]]:
     """Credibility mask ``Q`` (1 = credible, 0 = singular or missing) from the matched blocks.
@@ -248,7 +248,8 @@ def detect_singular(
         region: None, or a ``(B, 1, H, W)`` bool map of the pixels whose ``Q`` and ``P`` are wanted; elsewhere they
             are left unspecified. The numba kernel then computes a round only where a later round or the result
             reads it: the region, and in round ``r`` the pixels within ``(rounds − 1 − r) · reach`` px of it.
-        reach: how far from a pixel its matched centres lie, in px (the search radius): with ``region``.
+        reach: how far from a pixel its matched centres lie, in px (the search window's radius): needed with
+            ``region``.
         backend: ``"numba"`` (the CPU kernel of :mod:`~torch_depth_sr.singular_kernel`), ``"torch"`` (tensor
             operations, any device) or ``"auto"`` (numba for float CPU tensors when it is installed and
             ``TORCH_DEPTH_SR_NO_NUMBA`` is unset, else torch). Both give the same ``Q`` and ``P`` up to
@@ -279,6 +280,8 @@ def detect_singular(
         raise DepthSRError(f"tau must be in (0, 1]; got {tau!r}.")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise DepthSRError(f"rounds must be an int >= 1; got {rounds!r}.")
+    if region is not None and (isinstance(reach, bool) or not isinstance(reach, int) or reach < 0):
+        raise DepthSRError(f"with a region, reach must be an int >= 0 (the matches' search radius); got {reach!r}.")
     if backend not in ("auto", "numba", "torch"):
         raise DepthSRError(f"backend must be 'auto', 'numba' or 'torch'; got {backend!r}.")
     b = y.shape[0]
