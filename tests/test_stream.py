@@ -391,10 +391,12 @@ def test_later_layers_equal_the_whole_frame_where_everything_changed():
     assert np.array_equal(a, b)
 
 
-def _moved_object_after_static_frames(monkeypatch, path: str):
+def _moved_object_after_static_frames(monkeypatch, path: str, most: float = 0.5):
     """A stream of a model without re-matching in its later layers: five static frames, then an object moved in;
-    the later layers' update regions it ran with are recorded."""
+    the later layers' update regions it ran with are recorded. ``most``: the share of the frame up to which the later
+    layers run on crops around the fresh pixels (0: never)."""
     from torch_depth_sr.stream import frame as frame_module
+    from torch_depth_sr.stream import later_layers
 
     gt, rgb = _scene()
     moved = _noisy(gt, 9).astype(np.float32)
@@ -403,6 +405,7 @@ def _moved_object_after_static_frames(monkeypatch, path: str):
     rgb2[:, 10:20, 5:15] = 0.9
     if path == "device":
         monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
+    monkeypatch.setattr(later_layers, "_MOST", most)
     regions = []
     real = frame_module.run_later_layers
     monkeypatch.setattr(frame_module, "run_later_layers",
@@ -419,19 +422,27 @@ def _moved_object_after_static_frames(monkeypatch, path: str):
 
 
 def test_the_later_layers_update_the_fresh_pixels_alone_the_same_on_every_path(monkeypatch):
-    """A moved object's pixels get every layer and take its depth; with the kernels computing only what the fresh
-    pixels read (the CPU) or everything (the device path, a GPU's), the frame is the same up to round-off."""
-    outs = {path: _moved_object_after_static_frames(monkeypatch, path) for path in ("host", "device")}
-    (host, fresh, _), (device, fresh_d, _) = outs["host"], outs["device"]
-    assert np.array_equal(fresh, fresh_d) and fresh[10:20, 5:15].all() and 0 < fresh.mean() < 0.5
-    for r in (host, device):
-        assert np.abs(r.depth[10:20, 5:15] - 700.0).max() < 5.0
-    assert np.abs(host.depth - device.depth).max() < 1e-3
+    """A moved object's pixels get every layer and take its depth; on crops around the fresh pixels or on the whole
+    frame (the CPU), with the kernels computing everything (the device path, a GPU's), the frame is the same up to
+    round-off."""
+    from torch_depth_sr.stream import later_layers
+
+    cut = []
+    real = later_layers._cut_state
+    monkeypatch.setattr(later_layers, "_cut_state", lambda *a: cut.append(1) or real(*a))
+    outs = {(path, most): _moved_object_after_static_frames(monkeypatch, path, most)
+            for path, most in (("host", 1.0), ("host", 0.0), ("device", 1.0))}
+    host, fresh, _ = outs[("host", 1.0)]
+    assert cut and fresh[10:20, 5:15].all() and 0 < fresh.mean() < 0.5  # crops were cut
+    for other in (outs[("host", 0.0)], outs[("device", 1.0)]):
+        assert np.array_equal(fresh, other[1])
+        assert np.abs(host.depth - other[0].depth).max() < 1e-3
+    assert np.abs(host.depth[10:20, 5:15] - 700.0).max() < 5.0
 
 
 def test_a_later_layer_with_an_update_region_holds_every_other_pixel():
     """``Observation.update_region``: the layer's x-update solves for the region alone and every other pixel keeps
-    the state it came in with, bit for bit; in the region the values move."""
+    the state it came in with, bit for bit, the gate its verdict; in the region the values move."""
     gt, rgb = _scene()
     m = small_model().eval()
     seen = {}
@@ -458,6 +469,7 @@ def test_a_later_layer_with_an_update_region_holds_every_other_pixel():
         outside = ~region.expand_as(after)
         assert torch.equal(after[outside], before.to(after)[outside]), name
     assert (out.x - state.x)[region].abs().max() > 0
+    assert state.clean is not None and torch.equal(out.clean, state.clean)  # the gate keeps its verdict
 
 
 def test_change_test_sees_motion_and_ignores_noise_and_outliers():

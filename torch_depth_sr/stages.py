@@ -202,13 +202,13 @@ class SingularDetector(nn.Module):
         return self._support(obs, self.settings)
 
     def forward(self, obs: Observation, x: torch.Tensor, matches: BlockMatches,
-                held: Optional[tuple[torch.Tensor, torch.Tensor]] = None
-                ) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+                held: Optional[tuple] = None) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """``(Q, confidence, clean)`` of ``x`` against ``obs.y``: Q and the soft confidence P(x_i) (0 at missing
         pixels) (B,1,h,w), and the gate's verdict (B,1,1,1) bool, None without a gate. ``obs.supported`` is what
         :meth:`supported` returned; Q is 0 at ``obs.untrusted``, whatever the test and the gate say. With
-        ``obs.update_region`` the test runs for that region, and every other pixel keeps ``held`` (its incoming Q and
-        confidence), which the gate reads too."""
+        ``obs.update_region`` the test runs for that region, every other pixel keeps ``held`` (its incoming Q,
+        confidence), and the gate keeps its incoming verdict (``held[2]``, when there is one): what the layer computes
+        at a pixel then depends on the pixels near it only, so it may run on a crop around the region."""
         c = self.settings
         region = obs.update_region if held is not None else None
         with stage(obs.log.timings, "singular", x.device), torch.no_grad():
@@ -219,7 +219,11 @@ class SingularDetector(nn.Module):
                 q = torch.where(region, q, held[0].to(q))
                 conf = torch.where(region, conf, held[1].to(conf))
             q, conf = self._trust_supported(obs, q, conf, c)
-            q, clean = self._gate(obs, q, conf, c)
+            if region is not None and len(held) > 2 and held[2] is not None and c.gate is not None:
+                clean = held[2]
+                q = torch.where(clean, obs.observed.to(q.dtype), q)  # the gate's action, with its incoming verdict
+            else:
+                q, clean = self._gate(obs, q, conf, c)
             q = _distrust(obs, q)
         return q.to(x.dtype), conf.to(x.dtype), clean
 

@@ -240,7 +240,7 @@ class SingularTest(nn.Module):
 
     def forward(self, step: LayerStep, obs: Observation) -> None:
         s = step.state
-        held = None if s.q is None or s.confidence is None else (s.q, s.confidence)
+        held = None if s.q is None or s.confidence is None else (s.q, s.confidence, s.clean)
         step.q, step.confidence, step.clean = self.detector(obs, s.x, step.matches, held)
 
 
