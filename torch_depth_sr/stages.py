@@ -202,11 +202,12 @@ class SingularDetector(nn.Module):
         return self._support(obs, self.settings)
 
     def forward(self, obs: Observation, x: torch.Tensor, matches: BlockMatches,
-                held: Optional[tuple] = None) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
+                held: Optional[tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]] = None
+                ) -> tuple[torch.Tensor, torch.Tensor, Optional[torch.Tensor]]:
         """``(Q, confidence, clean)`` of ``x`` against ``obs.y``: Q and the soft confidence P(x_i) (0 at missing
         pixels) (B,1,h,w), and the gate's verdict (B,1,1,1) bool, None without a gate. ``obs.supported`` is what
         :meth:`supported` returned; Q is 0 at ``obs.untrusted``, whatever the test and the gate say. With
-        ``obs.update_region`` the test runs for that region, every other pixel keeps ``held`` (its incoming Q,
+        ``obs.update_region`` the test runs for that region, every other pixel keeps ``held`` (its incoming Q and
         confidence), and the gate keeps its incoming verdict (``held[2]``, when there is one): what the layer computes
         at a pixel then depends on the pixels near it only, so it may run on a crop around the region."""
         c = self.settings
@@ -219,7 +220,7 @@ class SingularDetector(nn.Module):
                 q = torch.where(region, q, held[0].to(q))
                 conf = torch.where(region, conf, held[1].to(conf))
             q, conf = self._trust_supported(obs, q, conf, c)
-            if region is not None and len(held) > 2 and held[2] is not None and c.gate is not None:
+            if region is not None and held[2] is not None and c.gate is not None:
                 clean = held[2]
                 q = torch.where(clean, obs.observed.to(q.dtype), q)  # the gate's action, with its incoming verdict
             else:
@@ -296,20 +297,16 @@ class LinearSolver(nn.Module):
         region = obs.update_region
         with stage(obs.log.timings, "cg", x0.device):
             if region is None:
-                res = cg_solve(apply_a, rhs, x0=x0.detach(), precond=self._preconditioner(q, diag, mu, K), tol=c.tol,
-                               max_iter=self.max_iter, implicit=c.implicit_backward,
-                               params=(mu,) if mu.requires_grad else (), early_exit=self.early_exit,
-                               backward_max_iter=c.max_iter)
-                x = res.x
+                op, b, start, pre = apply_a, rhs, x0.detach(), self._preconditioner(q, diag, mu, K)
             else:  # A_RR x_R = b_R − A_RF x_F: the unknowns in the region, the other pixels fixed at x0
                 m = region.to(x0.dtype)
                 fixed = (1 - m) * x0.detach()
-                res = cg_solve(lambda v: m * apply_a(m * v), m * (rhs - apply_a(fixed)), x0=m * x0.detach(),
-                               precond=self._region_preconditioner(q, diag, mu, K, m), tol=c.tol,
-                               max_iter=self.max_iter, implicit=c.implicit_backward,
-                               params=(mu,) if mu.requires_grad else (), early_exit=self.early_exit,
-                               backward_max_iter=c.max_iter)
-                x = m * res.x + fixed
+                op, b, start = (lambda v: m * apply_a(m * v)), m * (rhs - apply_a(fixed)), m * x0.detach()
+                pre = self._region_preconditioner(q, diag, mu, K, m)
+            res = cg_solve(op, b, x0=start, precond=pre, tol=c.tol, max_iter=self.max_iter,
+                           implicit=c.implicit_backward, params=(mu,) if mu.requires_grad else (),
+                           early_exit=self.early_exit, backward_max_iter=c.max_iter)
+            x = res.x if region is None else m * res.x + fixed
         obs.log.cg_iterations.append(res.iterations)
         return x
 
