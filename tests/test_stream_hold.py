@@ -1,6 +1,7 @@
-"""A stream's held outputs (StreamConfig.hold, stream/post_hold.py): a steady pixel keeps its previous output and the
-post-steps skip it; a change the change test does not see still reaches the output; the edge snap computes only the
-pixels it may move."""
+"""A stream's held outputs (StreamConfig.hold, stream/post_hold.py): while the edge steps act, a steady pixel keeps its
+previous output and the post-steps skip it; a change the change test does not see still reaches the output; the edge
+snap computes only the pixels it may move. The scenes here have no flying pixels, so the singular gate leaves the
+edge steps off; the tests of the holding itself switch them on (``edges_on``)."""
 import numpy as np
 import pytest
 import torch
@@ -30,6 +31,15 @@ def _noisy(gt: np.ndarray, t: int, sigma: float = 6.0) -> np.ndarray:
     return d.astype(np.uint16)
 
 
+@pytest.fixture
+def edges_on(monkeypatch):
+    """The stream takes the edge steps to act on every frame, as the gate makes them on sensor input."""
+    from torch_depth_sr.stream import frame as frame_module
+
+    monkeypatch.setattr(frame_module, "_edges_on",
+                        lambda state, like: torch.ones(like.shape[0], 1, 1, 1, dtype=torch.bool))
+
+
 def _model() -> DepthRestorer:
     return DepthRestorer.from_pretrained("denoise-fast")  # the stream's model: its post-steps, its `layers`
 
@@ -44,7 +54,7 @@ def _run(settings: dict, frames: list, rgb: np.ndarray) -> tuple[list, list]:
     return outs, infos
 
 
-def test_a_static_scene_holds_its_steady_pixels_and_flickers_less():
+def test_a_static_scene_holds_its_steady_pixels_and_flickers_less(edges_on):
     gt, rgb = _scene()
     frames = [_noisy(gt, t) for t in range(10)]
     held, info_h = _run({}, frames, rgb)
@@ -58,7 +68,7 @@ def test_a_static_scene_holds_its_steady_pixels_and_flickers_less():
         assert np.sqrt(np.mean((a - gt) ** 2)) < np.sqrt(np.mean((b - gt) ** 2)) + 0.5
 
 
-def test_a_change_below_the_change_test_still_reaches_the_output():
+def test_a_change_below_the_change_test_still_reaches_the_output(edges_on):
     """A surface that creeps by 0.5 σ a frame is static to the change test; the layers' value follows the runs' mean,
     and once it has moved by ``hold`` units the pixel is no longer held."""
     gt, rgb = _scene()
@@ -72,7 +82,7 @@ def test_a_change_below_the_change_test_still_reaches_the_output():
     assert abs(held[-1][left].mean() - every[-1][left].mean()) < 3.0
 
 
-def test_nothing_is_held_while_training():
+def test_nothing_is_held_while_training(edges_on):
     """With a gradient tracked, every pixel gets the post-steps (a held output would carry none): the frame is what
     the same stream makes without ``hold``, and the loss of a still pixel reaches the parameters."""
     import copy
@@ -116,3 +126,25 @@ def test_the_edge_snap_with_a_per_pixel_mask_moves_what_the_whole_frame_moves_th
     dense = snap_to_sides(x, rgb, rounds=1)
     assert torch.equal(sparse, torch.where(active, dense, x))
     assert not torch.equal(dense, x)  # something moved
+
+
+def test_outputs_are_held_only_while_the_edge_steps_act(monkeypatch):
+    """The edge steps act on the samples the singular gate finds outliers in. While they do not (a clean still scene
+    here) a held output would save nothing and only miss what the runs' means still add: nothing is held. An output
+    computed while they did not act is not held once they do (a mover's flying pixels switch them on for the whole
+    frame): that frame computes every pixel, and the next holds."""
+    from torch_depth_sr.stream import frame as frame_module
+
+    gt, rgb = _scene()
+    on = {"edges": False}
+    real = frame_module._edges_on
+    monkeypatch.setattr(frame_module, "_edges_on",
+                        lambda state, like: real(state, like) | torch.tensor(on["edges"], device=like.device))
+    s = StreamRestorer(_model(), {"max_frames": 3})
+    held = []
+    for t in range(9):
+        on["edges"] = t >= 6
+        held.append(s.step(_noisy(gt, t), rgb, return_details=True).info["stream"].get("held"))
+    assert held[1:6] == [0.0] * 5  # the gate found this scene clean: nothing held
+    assert held[6] == 0.0  # the verdict changed: nothing held
+    assert held[8] > 0.5

@@ -421,9 +421,10 @@ class StreamConfig(Group):
     unit, and without the bound a mover's new measurements joined the mean of the background it covered.
 
     A static pixel whose run has its full mean keeps its previous output while the layers' value there stays within
-    ``hold`` noise units (``join_cap``'s bounded unit) of the value that output was computed from: the post-steps (edge
-    snap, edge refit, the refiner) act on the other pixels only, which on sensor input with flying pixels is most of
-    what a step saves (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere). Nothing is held
+    ``hold`` noise units (``join_cap``'s bounded unit) of the value that output was computed from, on frames whose
+    singular gate switches the edge steps on (sensor input with flying pixels): the post-steps (edge snap, edge
+    refit, the refiner) act on the other pixels only, which there is most of what a step saves
+    (:mod:`~torch_depth_sr.stream.post_hold`; None = the post-steps everywhere). Nothing is held
     while a gradient is tracked (training). "Its full mean" is a static run of at least ``settled_frames`` frames (None:
     ``max_frames``): where the later layers and the post-steps may leave a pixel to its past.
 

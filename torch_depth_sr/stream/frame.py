@@ -22,8 +22,8 @@ confidence, the local noise spread; the colour image and the last matches. The f
    those pixels alone, every other pixel held at its state (:mod:`~torch_depth_sr.stream.later_layers`; None, the
    default: every layer on the whole frame);
 4. ``post`` — the post-steps, except on static pixels with a full run whose layers' value stayed within
-   ``settings.hold`` of the value their previous output came from: those keep that output
-   (:mod:`~torch_depth_sr.stream.post_hold`);
+   ``settings.hold`` of the value their previous output came from, while the edge steps act: those keep that
+   output (:mod:`~torch_depth_sr.stream.post_hold`);
 5. ``keep`` — the state for the next frame.
 
 A frame with no state (the first of a stream) is the per-frame model's, bit for bit. The state is kept without
@@ -93,6 +93,7 @@ class StreamState:
     # the share of static pixels (1 on a first frame: it found nothing changed); a 0-d tensor off the CPU kernels
     static_share: Union[float, torch.Tensor] = 1.0
     anchor: Optional[torch.Tensor] = None  # (B,1,H,W) the layers' value the output came from (settings.hold)
+    edges: Optional[torch.Tensor] = None  # (B,1,1,1) bool: the edge steps acted on this frame (settings.hold)
 
 
 class StreamFrame:
@@ -232,9 +233,13 @@ class StreamFrame:
         self.layers_x = x.detach()
         st, hold = self.state, self.settings.hold
         training = torch.is_grad_enabled() and x.requires_grad  # a held output would carry no gradient: none held
-        if hold is not None and self.warm and st.anchor is not None and not training:
+        if hold is not None and self.warm and st.anchor is not None and st.edges is not None and not training:
             anchor = obs.normalise(st.anchor.to(x))
-            self.steady = ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
+            # only while the edge steps act, and acted on the previous frame (so on every frame since the output was
+            # computed: a frame without them computes every pixel): a held output saves their work, and elsewhere
+            # would only miss what the runs' means and the temporal prior still add
+            edges = _edges_on(state, x) & st.edges.to(x.device)
+            self.steady = edges & ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
             self.stats["held"] = self.steady.float().mean()
         return run_post_steps(steps, x, state, obs, initial, self.steady,
                               None if self.steady is None else obs.temporal.target)
@@ -290,4 +295,12 @@ class StreamFrame:
                                     departed=torch.zeros_like(x) if self.departed is None else self.departed,
                                     match_weights=weights, policy=ScalePolicy(*(t.detach() for t in obs.policy)),
                                     static_share=self.stats.get("static", 1.0),
-                                    anchor=None if s.hold is None else self._anchor(x, obs))
+                                    anchor=None if s.hold is None else self._anchor(x, obs),
+                                    edges=None if s.hold is None else _edges_on(state, x))
+
+
+def _edges_on(state: RestorationState, like: torch.Tensor) -> torch.Tensor:
+    """(B,1,1,1) bool: the singular gate found outliers, so the edge steps act (False without a gate's verdict)."""
+    if state.clean is None:
+        return torch.zeros(like.shape[0], 1, 1, 1, dtype=torch.bool, device=like.device)
+    return (~state.clean).to(like.device).view(-1, 1, 1, 1)
