@@ -236,8 +236,8 @@ class StreamFrame:
         if hold is not None and self.warm and st.anchor is not None and st.edges is not None and not training:
             anchor = obs.normalise(st.anchor.to(x))
             # only while the edge steps act, and acted on the previous frame (so on every frame since the output was
-            # computed: a frame without them computes every pixel): a held output saves their work, and elsewhere
-            # would only miss what the runs' means and the temporal prior still add
+            # computed: a frame without them computes every pixel): a held output saves their work; elsewhere it
+            # saves none and only freezes the pixel
             edges = _edges_on(state, x) & st.edges.to(x.device)
             self.steady = edges & ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
             self.stats["held"] = self.steady.float().mean()

@@ -20,10 +20,9 @@ frame-to-frame change through at edges, where the refit's median is steadier, an
 Outputs are held only on a frame whose singular gate switches the edge steps on, after a frame that did too
 (``StreamState.edges``; a frame without them computes every pixel). Their work is what a held output saves; on a
 frame without them (a still scene whose runs' means hide the sensor's flying pixels, or input without flying pixels)
-a held output saved nothing and only missed what the runs' means and the temporal prior still add. And an output
-made while they did not act missed them for as long as it was held once a mover's flying pixels switched them on: on
-the 2006 streams with a mover (``sensor``) the stream had been 2 % worse than without held outputs
-(``docs/measurements/issue28-stream/twenty-eighth-stop/``).
+a held output saves nothing and only freezes the pixel. And an output made while they did not act missed them for as
+long as it was held once a mover's flying pixels switched them on: on the 2006 streams with a mover (``sensor``) the
+stream had been 2 % worse than without held outputs (``docs/measurements/issue28-stream/twenty-eighth-stop/``).
 """
 from __future__ import annotations
 

@@ -4,9 +4,13 @@ frame and where it is not. Frames 10-19 of an evaluated sequence at 480×640, me
 
     OMP_NUM_THREADS=2 python docs/measurements/issue28-stream/twenty-sixth-stop/step_cold_stages.py [static-2movers]
 
+``SETTINGS`` (JSON, optional) gives the stream's settings, e.g. ``SETTINGS='{"hold": 0.5}'`` (the twenty-eighth stop).
+
 ``total`` minus the named stages is the rest (the observation, the change test, the fill, the state).
 """
 import collections
+import json
+import os
 import statistics
 import sys
 import time
@@ -22,7 +26,7 @@ def main() -> None:
     name = sys.argv[1] if len(sys.argv) > 1 else "static-2movers"
     seq = make_sequence(next(s for s in STREAM_SEQUENCES if s.name == name), frames=20, height=480, width=640)
     model = default_stream_model().eval()
-    stream = StreamRestorer(model)
+    stream = StreamRestorer(model, json.loads(os.environ.get("SETTINGS", "{}")))
     step, cold = collections.defaultdict(list), collections.defaultdict(list)
     with torch.no_grad():
         for t in range(20):
