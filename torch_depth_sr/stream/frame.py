@@ -42,6 +42,7 @@ from ..config import SingularConfig, StreamConfig
 from ..errors import ShapeError
 from ..initial import InitialEstimate
 from ..model import NoiseSigma
+from ..native import host_path
 from ..noise import sampled_noise_sigma
 from ..observation import Observation, ScalePolicy
 from ..stages import supported_pixels
@@ -239,8 +240,11 @@ class StreamFrame:
             # computed: a frame without them computes every pixel): a held output saves their work; elsewhere it
             # saves none and only freezes the pixel
             edges = _edges_on(state, x) & st.edges.to(x.device)
-            self.steady = edges & ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
-            self.stats["held"] = self.steady.float().mean()
+            if host_path(x.device) and not bool(edges.any()):  # nothing may be held: the post-steps of a cold frame
+                self.stats["held"] = 0.0  # (whose edge steps skip a clean sample at once, a per-pixel mask does not)
+            else:
+                self.steady = edges & ~self.fresh & ((self.layers_x - anchor).abs() <= hold * self.unit)
+                self.stats["held"] = self.steady.float().mean()
         return run_post_steps(steps, x, state, obs, initial, self.steady,
                               None if self.steady is None else obs.temporal.target)
 
