@@ -469,3 +469,39 @@ def test_small_windows_re_rank_the_same_candidates_by_the_masked_exact_search(dt
     (d_mask, i_mask), (d_each, i_each) = out[9], out[0]
     assert float((i_mask == i_each).double().mean()) >= 0.999
     torch.testing.assert_close(d_mask, d_each, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("window,k", [(7, 10), (11, 6)])
+def test_a_search_at_some_pixels_gives_the_whole_images_matches_there_bit_for_bit(dtype, window, k):
+    """block_match_at: the pixels asked for get the whole image's matches (distances and indices to the last bit,
+    at any row, whatever the other pixels), the others keep what was in the output."""
+    from torch_depth_sr.block_matching import block_match_at
+
+    x, c, t = _inputs(b=2, h=70, w=90, dtype=dtype, seed=3)
+    full = block_match(x, c, t, block_size=3, search_window=window, k=k, color_weight=2.0)
+    g = torch.Generator().manual_seed(4)
+    where = torch.rand(2, 1, 70, 90, generator=g) < 0.02  # scattered pixels, and two blocks on odd rows
+    where[0, :, 31:44, 5:23] = True
+    where[1, :, 1:8, 60:90] = True
+    for mask in (where, torch.zeros_like(where), torch.ones_like(where)):
+        dist, index = torch.full_like(full.dist, -1.0), torch.full_like(full.index, -5)
+        assert block_match_at(x, c, t, mask, dist, index, block_size=3, search_window=window, color_weight=2.0)
+        at = mask.expand_as(dist)
+        assert torch.equal(dist[at], full.dist[at]) and torch.equal(index[at], full.index[at])
+        assert bool((dist[~at] == -1).all()) and bool((index[~at] == -5).all())
+
+
+def test_a_search_at_some_pixels_declines_what_its_kernel_cannot_write():
+    from torch_depth_sr.block_matching import block_match_at
+
+    x, c, t = _inputs(b=1, h=20, w=24)
+    m = block_match(x, c, t, block_size=3, search_window=7, k=4)
+    where = torch.ones(1, 1, 20, 24, dtype=torch.bool)
+    dist, index = m.dist.clone(), m.index.clone()
+    assert not block_match_at(x, c, t, where, dist.double(), index, block_size=3, search_window=7)  # another dtype
+    assert not block_match_at(x, c, t, where, dist.transpose(2, 3).contiguous().transpose(2, 3), index,
+                              block_size=3, search_window=7)  # not C-contiguous
+    with pytest.raises(DepthSRError):
+        block_match_at(x, c, t, where, dist[:, :1].expand(1, 400, 20, 24).contiguous(),
+                       index[:, :1].expand(1, 400, 20, 24).contiguous(), block_size=3, search_window=7)  # k too big

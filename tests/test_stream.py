@@ -524,9 +524,11 @@ def test_reused_matches_equal_the_search_where_it_runs():
     mix = sm(obs.y, obs, obs.observed)
     f = fresh.expand_as(full.index)
     assert torch.equal(mix.index[f], full.index[f]) and torch.equal(mix.index[~f], kept[1][~f])
+    assert torch.equal(mix.dist[f], full.dist[f])  # to the last bit: the whole image's block sums, not a crop's
     assert sm.searched < H * W  # a crop, not the whole frame
     again = sm.rematch(obs.y, obs, obs.observed, full)
-    assert torch.equal(again.index[f], m.block_matcher.rematch(obs.y, obs, obs.observed, full).index[f])
+    whole = m.block_matcher.rematch(obs.y, obs, obs.observed, full)
+    assert torch.equal(again.index[f], whole.index[f]) and torch.equal(again.dist[f], whole.dist[f])
 
 
 def test_kept_match_weights_are_the_softmax_again_and_skipped_when_the_temperature_learns():

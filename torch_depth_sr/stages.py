@@ -15,7 +15,7 @@ from typing import Callable, Optional
 import torch
 from torch import nn
 
-from .block_matching import BlockMatches, block_match, refine_matches
+from .block_matching import BlockMatches, block_match, block_match_at, refine_matches
 from .block_matching._common import candidates_everywhere
 from .config import BlockMatchingConfig, SingularConfig, SolverConfig
 from .native import host_path, on_device
@@ -101,6 +101,20 @@ class BlockMatcher(nn.Module):
         """The matches of ``x`` in a scheduled layer, by ``settings.rematch`` (``"refine"`` starts from
         ``previous``)."""
         return self._run(self._rematch, x, obs, q, previous)
+
+    def search_at(self, x: torch.Tensor, obs: Observation, q: torch.Tensor, where: torch.Tensor,
+                  dist: torch.Tensor, index: torch.Tensor) -> bool:
+        """:meth:`forward`'s matches at the pixels ``where`` alone, written into ``dist`` and ``index`` in place
+        (:func:`~torch_depth_sr.block_matching.block_match_at`: the whole image's, bit for bit); False, nothing
+        written, where that search does not run (off the CPU's numba kernel)."""
+        s = self.settings
+        h, w = x.shape[-2:]
+        trust = q.detach() if q.shape[-2:] == (h, w) else None
+        window, _ = s.window_and_k()[obs.task]
+        with stage(obs.log.timings, "block_matching", x.device):
+            return block_match_at(x.detach(), obs.rgb, trust, where, dist, index, block_size=s.block_size,
+                                  search_window=window, color_weight=self.color_weight.detach(),
+                                  include_self=s.include_self)
 
     def extra_repr(self) -> str:
         s = self.settings

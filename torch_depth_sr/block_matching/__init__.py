@@ -19,7 +19,8 @@ Layout of the package:
 
 * ``_common.py`` — the result type, argument checks, offset ids and weights;
 * ``reference.py`` — :func:`block_match_reference`, the unfold oracle (tests, small images);
-* ``cpu_exact.py`` — the exact search on the CPU, a numba kernel (running top-k over the window);
+* ``cpu_exact.py`` — the exact search on the CPU, a numba kernel (running top-k over the window), of the whole
+  image or of some pixels (:func:`block_match_at`);
 * ``torch_search.py`` — the exact search on any device, in torch (GPU; CPU when numba is missing);
 * ``refine.py`` / ``refine_cpu.py`` / ``refine_torch.py`` — :func:`refine_matches`, the re-matching search: the
   previous matches, optionally the neighbours' (PatchMatch propagation) and the window's offsets on a lattice,
@@ -44,7 +45,8 @@ from .reference import block_match_reference
 from .refine import refine_matches
 from .torch_search import block_match_torch
 
-__all__ = ["BlockMatches", "block_match", "block_match_reference", "refine_matches", "gather_neighbors"]
+__all__ = ["BlockMatches", "block_match", "block_match_at", "block_match_reference", "refine_matches",
+           "gather_neighbors"]
 
 BACKENDS = ("auto", "numba", "torch")
 
@@ -133,6 +135,46 @@ def block_match(
         else:
             dist, index = block_match_torch(*args)
     return finish(dist.to(depth.device), index.to(depth.device), temp)
+
+
+def block_match_at(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
+                   where: torch.Tensor, dist: torch.Tensor, index: torch.Tensor, block_size: int = 5,
+                   search_window: int = 21, color_weight: Scalar = 1.0, include_self: bool = False) -> bool:
+    """:func:`block_match`'s exact search at the pixels ``where`` (B, 1, H, W) bool alone, their ``k`` matches
+    (``k = dist.shape[1]``) written into ``dist`` and ``index`` (B, k, H, W) in place, the other pixels' left as they
+    are: the matches a stream keeps where its scene has not changed, searched again where it has. Each written pixel
+    gets the whole image's matches bit for bit (its rows and block sums are the whole image's, not a crop's).
+
+    Only by the numba kernel on the CPU, into C-contiguous ``dist`` of ``depth``'s dtype (float32 or float64) and
+    int64 ``index``: returns False and writes nothing otherwise (the caller searches another way).
+
+    Examples:
+        >>> depth, rgb = torch.rand(1, 1, 24, 32), torch.rand(1, 3, 24, 32)
+        >>> m = block_match(depth, rgb, None, block_size=3, search_window=7, k=4)
+        >>> dist, index = torch.zeros_like(m.dist), torch.zeros_like(m.index)
+        >>> where = torch.zeros(1, 1, 24, 32, dtype=torch.bool)
+        >>> where[..., 5:9, 10:20] = True
+        >>> block_match_at(depth, rgb, None, where, dist, index, block_size=3, search_window=7)
+        True
+        >>> bool(torch.equal(index[where.expand_as(index)], m.index[where.expand_as(index)]))
+        True
+    """
+    b, _, h, w = depth.shape
+    k = dist.shape[1]
+    rho, _ = prepare(depth, rgb, trust, block_size, search_window, k, color_weight, 1.0, include_self, 1)
+    if (not host_path(depth.device) or depth.dtype not in (torch.float32, torch.float64) or dist.dtype != depth.dtype
+            or index.dtype != torch.int64 or dist.shape != (b, k, h, w) or index.shape != dist.shape
+            or where.shape != (b, 1, h, w) or not (dist.is_contiguous() and index.is_contiguous())):
+        return False
+    kernel = cpu_kernel("block_matching.cpu_exact", "block_match_cpu_exact_at", required=False)
+    if kernel is None:
+        return False
+    with torch.no_grad():
+        trust = None if trust is None else trust.to(depth.dtype)
+        rgb = None if rgb is None else rgb.to(depth.dtype)
+        kernel(depth.detach(), rgb, trust, where.to(torch.bool), dist, index, block_size, search_window, k,
+               rho.detach(), include_self)
+    return True
 
 
 def gather_neighbors(values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:

@@ -27,7 +27,7 @@ from numba.extending import overload
 from ..native import run_range, run_tasks
 from ._common import offset_order, symmetric_order
 
-__all__ = ["block_match_cpu_exact"]
+__all__ = ["block_match_cpu_exact", "block_match_cpu_exact_at"]
 
 _ID_NONE = np.int32(0x7FFFFFFF)
 
@@ -306,14 +306,18 @@ def _ol_lists_high(dd, high, j0, j1, keys):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, topd, topi, seeded, dist, index,
-          keys, masks):
+def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1, wa, wb, topd, topi, seeded, dist,
+          index, keys, masks, where):
     """Running top-k for image rows [h0, h1); ``topd/topi`` are (h1-h0, W, k) views of this band: the working lists,
     read when ``seeded`` and written at the end, unless ``dist`` and ``index`` (k, H, W) are not empty: then the band
     writes its rows of the final distances and flat indices there instead (what :func:`_finalize` would make).
     ``keys``: None, or for float32 planes a (h1-h0, k, W) uint64 array in which the lists run as packed keys
     (the ``_lists_*`` overloads: numba compiles only the way the argument's type selects). ``masks``: None, or
     (words, H, W) uint64 bits of the offsets each pixel may keep (:func:`_only_allowed`; the re-matching's candidates).
+    ``[wa, wb)``: the image columns the band searches (the whole width, or a window of a masked search): a pixel of
+    the window is offered only candidates inside it, so its lists are the whole image's where the window reaches the
+    search radius beyond it (rows and planes are the whole image's: the sums run in the same order). ``where``: (H, W)
+    uint8, or (0, 0) for every pixel: the pixels whose final matches the band writes (with ``dist``).
 
     ``xp, tp`` (Hp, Wp) and ``cp`` (C, Hp, Wp): planes replicate-padded by r, then zero-padded by R.
     ``consts`` = (ρ/C, ρ/(C·b²), 1/b²) in the planes' dtype, so that float32 stays float32 (SIMD width).
@@ -321,6 +325,9 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
     bs = 2 * r + 1
     s = 2 * big_r + 1
     u_len = big_w + 2 * r
+    nw = wb - wa  # the window's columns: the lists' width
+    u0, u1 = wa, wb + 2 * r  # the columns of the padded planes its block sums read
+    nu = u1 - u0
     nc = cp.shape[0]
     cw, crho, inb = consts[0], consts[1], consts[2]
     one = consts[3]
@@ -333,13 +340,13 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
     colour_sum = np.zeros(big_w, dtype=xp.dtype)
     k = topd.shape[2]
     # the band's lists rank-major, (rows, k, W): rank m of a row is contiguous, so an offer to a row is vector loops
-    rd = np.empty((h1 - h0, k, big_w), dtype=xp.dtype)
-    ri = np.empty((h1 - h0, k, big_w), dtype=np.int32)
+    rd = np.empty((h1 - h0, k, nw), dtype=xp.dtype)
+    ri = np.empty((h1 - h0, k, nw), dtype=np.int32)
     for a in range(h1 - h0):
         for m in range(k):
-            for j in range(big_w):
-                rd[a, m, j] = topd[a, j, m] if seeded else np.inf
-                ri[a, m, j] = topi[a, j, m] if seeded else _ID_NONE
+            for j in range(nw):
+                rd[a, m, j] = topd[a, wa + j, m] if seeded else np.inf
+                ri[a, m, j] = topi[a, wa + j, m] if seeded else _ID_NONE
     high = np.zeros(big_w, dtype=np.uint64)  # a row's distances as the high halves of keys
     dm = np.zeros(big_w, dtype=xp.dtype)  # the same, with the offers of the candidates a pixel may not keep voided
     hm = np.zeros(big_w, dtype=np.uint64)
@@ -361,53 +368,54 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
                     i0, i1 = m0, m1
                 else:
                     i0, i1 = min(i0, m0), max(i1, m1)
-        if i1 <= i0:
+        # columns j of the window whose candidate j + dx lies in it too (the whole image's: inside the image)
+        j0 = wa + (-dx if dx < 0 else 0)
+        j1 = wb - (dx if dx > 0 else 0)
+        if i1 <= i0 or j1 <= j0:
             continue
-        j0 = -dx if dx < 0 else 0
-        j1 = big_w - dx if dx > 0 else big_w
         for t in range(i0, i1 + 2 * r):
             slot = t % bs
-            xa = xp[big_r + t, big_r:big_r + u_len]
-            xb = xp[big_r + t + dy, big_r + dx:big_r + dx + u_len]
-            e = ring[0, slot]
+            xa = xp[big_r + t, big_r + u0:big_r + u1]
+            xb = xp[big_r + t + dy, big_r + dx + u0:big_r + dx + u1]
+            e = ring[0, slot, u0:u1]
             if use_t:
-                ta = tp[big_r + t, big_r:big_r + u_len]
-                tb = tp[big_r + t + dy, big_r + dx:big_r + dx + u_len]
-                et = ring[1, slot]
-                ec = ring[2, slot]
-                for u in range(u_len):
+                ta = tp[big_r + t, big_r + u0:big_r + u1]
+                tb = tp[big_r + t + dy, big_r + dx + u0:big_r + dx + u1]
+                et = ring[1, slot, u0:u1]
+                ec = ring[2, slot, u0:u1]
+                for u in range(nu):
                     tt = ta[u] * tb[u]
                     df = xa[u] - xb[u]
                     e[u] = tt * (df * df)
                     et[u] = tt
                     ec[u] = zero
                 for c in range(nc):
-                    ca = cp[c, big_r + t, big_r:big_r + u_len]
-                    cb = cp[c, big_r + t + dy, big_r + dx:big_r + dx + u_len]
-                    for u in range(u_len):
+                    ca = cp[c, big_r + t, big_r + u0:big_r + u1]
+                    cb = cp[c, big_r + t + dy, big_r + dx + u0:big_r + dx + u1]
+                    for u in range(nu):
                         dc = ca[u] - cb[u]
                         ec[u] += dc * dc
             else:
-                for u in range(u_len):
+                for u in range(nu):
                     df = xa[u] - xb[u]
                     e[u] = df * df
                 for c in range(nc):
-                    ca = cp[c, big_r + t, big_r:big_r + u_len]
-                    cb = cp[c, big_r + t + dy, big_r + dx:big_r + dx + u_len]
-                    for u in range(u_len):
+                    ca = cp[c, big_r + t, big_r + u0:big_r + u1]
+                    cb = cp[c, big_r + t + dy, big_r + dx + u0:big_r + dx + u1]
+                    for u in range(nu):
                         dc = ca[u] - cb[u]
                         e[u] += cw * (dc * dc)
             if t < i0 + 2 * r:
                 continue
             i = t - 2 * r
             for bb in range(nbuf):
-                cs = col[bb]
-                rb0 = ring[bb, 0]
-                for u in range(u_len):
+                cs = col[bb, u0:u1]
+                rb0 = ring[bb, 0, u0:u1]
+                for u in range(nu):
                     cs[u] = rb0[u]
                 for s2 in range(1, bs):
-                    rbs = ring[bb, s2]
-                    for u in range(u_len):
+                    rbs = ring[bb, s2, u0:u1]
+                    for u in range(nu):
                         cs[u] += rbs[u]
             # the row's distances in loops that start at 0: numba wraps a negative index around, and LLVM vectorises
             # a loop only where it can tell the index is not negative (from j0 it could not: half the time)
@@ -442,25 +450,29 @@ def _band(xp, tp, cp, use_t, big_h, big_w, r, big_r, order, both, consts, h0, h1
             _lists_high(dd, high, j0, j1, keys)
             if i >= f0 and i < f1:  # pixel (i, j) gets candidate (i+dy, j+dx)
                 dv, hv = _only_allowed(dd, high, j0, j1, masks, i, j0, oid, dm, hm)
-                _lists_offer(dv, hv, j0, j1, j0, np.int64(oid), rd, ri, keys, i - h0, seeded)
+                _lists_offer(dv, hv, j0, j1, j0 - wa, np.int64(oid), rd, ri, keys, i - h0, seeded)
             if i >= m0 and i < m1:  # pixel (i+dy, j+dx) gets candidate (i, j)
                 dv, hv = _only_allowed(dd, high, j0, j1, masks, i + dy, j0 + dx, mid, dm, hm)
-                _lists_offer(dv, hv, j0, j1, j0 + dx, mid, rd, ri, keys, i + dy - h0, seeded)
+                _lists_offer(dv, hv, j0, j1, j0 + dx - wa, mid, rd, ri, keys, i + dy - h0, seeded)
     _lists_unpack(keys, rd, ri)
+    every = where.shape[0] == 0
     if dist.size > 0:
         for a in range(h1 - h0):
             i = h0 + a
             for m in range(k):
-                for j in range(big_w):
-                    oid = ri[a, m, j]
-                    dist[m, i, j] = rd[a, m, j]
+                for jj in range(nw):
+                    j = wa + jj
+                    if not every and where[i, j] == 0:
+                        continue
+                    oid = ri[a, m, jj]
+                    dist[m, i, j] = rd[a, m, jj]
                     index[m, i, j] = (i + oid // s - big_r) * big_w + (j + oid % s - big_r)
         return
     for a in range(h1 - h0):
-        for j in range(big_w):
+        for jj in range(nw):
             for m in range(k):
-                topd[a, j, m] = rd[a, m, j]
-                topi[a, j, m] = ri[a, m, j]
+                topd[a, wa + jj, m] = rd[a, m, jj]
+                topi[a, wa + jj, m] = ri[a, m, jj]
 
 
 def _pad(planes: torch.Tensor, r: int, big_r: int, dtype) -> np.ndarray:
@@ -507,12 +519,13 @@ def padded_planes(depth, rgb, trust, r: int, big_r: int):
 
 
 def search(planes, h, w, block_size, search_window, rho, include_self, chunk_rows, stride, topd, topi, seeded,
-           out=None, masks=None):
+           out=None, masks=None, where=None):
     """Run the exact search over the offsets of the ``stride`` lattice into the working lists ``topd/topi``
     (B, H, W, k); with ``seeded`` they start from the candidates already in them. With ``out = (dist, index)``
     (B, k, H, W) and lists that are not seeded, the bands write the final matches there instead (``topd/topi``
     unused: pass None). With ``masks`` (B, words, H, W) uint64, a pixel keeps only the offsets whose bits are set
-    (offset id ``o``: bit ``o % 64`` of word ``o // 64``)."""
+    (offset id ``o``: bit ``o % 64`` of word ``o // 64``). With ``where`` (B, H, W) bool and ``out``, only those
+    pixels are searched and written (:func:`_windows`); the rest of ``out`` is left as it was."""
     xp, tp, cp, use_t = planes
     bsz = xp.shape[0]
     k = out[0].shape[1] if out is not None else topd.shape[-1]
@@ -531,20 +544,67 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
     # than 32 ran the search ~15 % faster (the shifts of the insertions themselves are cheap, a heap did not help)
     fit = (2 << 20) // (w * k * (xp.itemsize + 4))
     rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads())), fit))
-    bands = [(b, h0, min(h, h0 + rows)) for b in range(bsz) for h0 in range(0, h, rows)]
+    if where is None:
+        bands = [(b, h0, min(h, h0 + rows), 0, w) for b in range(bsz) for h0 in range(0, h, rows)]
+        only = np.zeros((bsz, 0, 0), np.uint8)
+    else:  # the windows of the pixels, or the whole image's bands where they would cover most of it
+        bands = _windows(where, min(rows, _WINDOW_ROWS), search_window // 2)
+        if sum((h1 - h0) * (wb - wa) for _, h0, h1, wa, wb in bands) >= 0.8 * bsz * h * w:
+            bands = [(b, h0, min(h, h0 + rows), 0, w) for b in range(bsz) for h0 in range(0, h, rows)]
+        only = np.ascontiguousarray(where, dtype=np.uint8)
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],
                       dtype=xp.dtype)
 
     packed = xp.dtype == np.float32
 
-    def band(n: int) -> None:  # a band writes only its own rows: the bands run in any order
-        b, h0, h1 = bands[n]
-        keys = np.empty((h1 - h0, k, w), np.uint64) if packed else None
-        _band(xp[b], tp[b], cp[b], use_t, h, w, r, big_r, order, both, consts[b], h0, h1, topd[b, h0:h1],
-              topi[b, h0:h1], seeded, *out_of(b), keys, None if masks is None else masks[b])
+    def band(n: int) -> None:  # a band writes only its own pixels: the bands run in any order
+        b, h0, h1, wa, wb = bands[n]
+        keys = np.empty((h1 - h0, k, wb - wa), np.uint64) if packed else None
+        _band(xp[b], tp[b], cp[b], use_t, h, w, r, big_r, order, both, consts[b], h0, h1, wa, wb, topd[b, h0:h1],
+              topi[b, h0:h1], seeded, *out_of(b), keys, None if masks is None else masks[b], only[b])
 
     run_tasks(band, len(bands))
+
+
+# a masked search's bands: rows, and the gap (px) below which two windows of a band are searched as one. On a moving
+# 640x480 stream's fresh pixels 8-32 rows and gaps of 8-64 px all took 20-22 ms
+# (docs/measurements/issue28-stream/twenty-ninth-stop/masked_search_windows.txt)
+_WINDOW_ROWS = 16
+_WINDOW_GAP = 32
+
+
+def _windows(where: np.ndarray, rows: int, reach: int) -> list[tuple[int, int, int, int, int]]:
+    """The bands ``(b, h0, h1, wa, wb)`` of a masked search: in each band of ``rows`` rows that has pixels of
+    ``where`` (B, H, W) bool, the runs of their columns, each widened by ``reach`` (the search radius) on both sides
+    and clipped to the image, runs closer than ``_WINDOW_GAP`` joined, the rows trimmed to those of its pixels."""
+    bsz, h, w = where.shape
+    out = []
+    for b in range(bsz):
+        for h0 in range(0, h, rows):
+            part = where[b, h0:h0 + rows]
+            cols = np.flatnonzero(part.any(0))
+            if cols.size == 0:
+                continue
+            breaks = np.flatnonzero(np.diff(cols) > 2 * reach + _WINDOW_GAP)
+            for first, last in zip(np.r_[0, breaks + 1], np.r_[breaks, cols.size - 1]):
+                wa, wb = max(0, cols[first] - reach), min(w, cols[last] + 1 + reach)
+                lines = np.flatnonzero(part[:, cols[first]:cols[last] + 1].any(1))
+                out.append((b, h0 + int(lines[0]), h0 + int(lines[-1]) + 1, int(wa), int(wb)))
+    return out
+
+
+def block_match_cpu_exact_at(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],
+                             where: torch.Tensor, dist: torch.Tensor, index: torch.Tensor, block_size: int,
+                             search_window: int, k: int, rho: torch.Tensor, include_self: bool) -> None:
+    """The exact top-k matches of the pixels ``where`` (B, 1, H, W) bool, written into ``dist`` and ``index``
+    (B, k, H, W; CPU, C-contiguous, ``dist`` of the planes' dtype) in place; the other pixels keep theirs. Each
+    written pixel's matches are the whole image's search's, bit for bit: its window's rows and sums are the whole
+    image's."""
+    bsz, _, h, w = depth.shape
+    planes = padded_planes(depth, rgb, trust, block_size // 2, search_window // 2)
+    search(planes, h, w, block_size, search_window, rho, include_self, None, 1, None, None, False,
+           out=(dist.numpy(), index.numpy()), where=where.detach().reshape(bsz, h, w).numpy())
 
 
 def block_match_cpu_exact(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],

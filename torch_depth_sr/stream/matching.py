@@ -3,9 +3,16 @@
 A pixel whose whole search window (and the blocks around the candidates) is static sees the same blocks as in the
 previous frame, so its matches are still the best ones: :class:`StreamMatcher` keeps them (their distances, with
 the weights recomputed at the model's current temperature, so that the temperature still learns). The other pixels
-are searched as the model searches them (the exact search for x⁰, the model's re-matching in its scheduled layers),
-on rectangles around them: each is padded by the search radius plus the block radius, so that every candidate
-block of its core lies inside it and its matches equal those of the whole image there.
+are searched as the model searches them (the exact search for x⁰, the model's re-matching in its scheduled layers).
+On the CPU, x⁰'s search runs at those pixels alone, inside the whole image
+(:func:`~torch_depth_sr.block_matching.block_match_at`). Otherwise it runs on rectangles around them: each is padded
+by the search radius plus the block radius, so that every candidate block of its core lies inside it. Each rectangle
+starts on a row that is a multiple of the block size, so that the CPU kernel's block sums add the rows in the whole
+image's order. Either way a searched pixel's matches are the whole image's, to the last bit.
+
+The rectangles had cost most of a moving step's search: at 640×480 they covered about 30 % of the frame for 10 %
+fresh pixels, and a narrow one paid the kernel's cost per row for a few columns
+(docs/measurements/issue28-stream/twenty-ninth-stop/).
 """
 from __future__ import annotations
 
@@ -31,27 +38,29 @@ def search_radius(settings: BlockMatchingConfig, task: str) -> int:
     return window // 2 + settings.block_size // 2
 
 
-def _runs(flags: torch.Tensor, pad: int, size: int) -> list[tuple[int, int, int, int]]:
+def _runs(flags: torch.Tensor, pad: int, size: int, align: int = 1) -> list[tuple[int, int, int, int]]:
     """Runs ``(a, b, c0, c1)`` covering the ``True`` entries of ``flags (N,)``: the crop ``[a, b)`` (the run padded by
-    ``pad``, clipped to ``[0, size)``) and its core ``[c0, c1)``. Runs whose crops would overlap are merged."""
+    ``pad``, clipped to ``[0, size)``, ``a`` a multiple of ``align``) and its core ``[c0, c1)``. Runs whose crops
+    would overlap are merged."""
     runs: list[list[int]] = []
     for i in torch.nonzero(flags).flatten().tolist():
-        if runs and i <= runs[-1][1] + 2 * pad + 1:
+        if runs and i <= runs[-1][1] + 2 * pad + align:
             runs[-1][1] = i
         else:
             runs.append([i, i])
-    return [(max(0, c0 - pad), min(size, c1 + 1 + pad), c0, c1 + 1) for c0, c1 in runs]
+    return [(max(0, c0 - pad) // align * align, min(size, c1 + 1 + pad), c0, c1 + 1) for c0, c1 in runs]
 
 
-def crops(fresh: torch.Tensor, pad: int) -> list[tuple[slice, slice, slice, slice]]:
+def crops(fresh: torch.Tensor, pad: int, align: int = 1) -> list[tuple[slice, slice, slice, slice]]:
     """Rectangles that cover the ``True`` pixels of ``fresh (B,1,H,W)`` (over the batch): bands of rows, and in each
     band runs of columns, each padded by ``pad`` (clipped to the image). Returns ``(rows, cols, core_rows,
     core_cols)``: the crop and the part of it whose matches the crop gives exactly (every candidate block of a core
-    pixel lies in the crop)."""
+    pixel lies in the crop). ``align``: the crops' first rows are multiples of it (the block size: the CPU kernel's
+    block sums then add a crop's rows in the whole image's order, to the last bit)."""
     h, w = fresh.shape[-2:]
     any_b = fresh.flatten(0, 1).any(0)  # (H, W)
     out = []
-    for a, b, r0, r1 in _runs(any_b.any(1), pad, h):
+    for a, b, r0, r1 in _runs(any_b.any(1), pad, h, align):
         for c, d, q0, q1 in _runs(any_b[r0:r1].any(0), pad, w):
             out.append((slice(a, b), slice(c, d), slice(r0, r1), slice(q0, q1)))
     return out
@@ -85,7 +94,7 @@ def crop_matches(m: BlockMatches, rows: slice, cols: slice, width: int, outside:
 class StreamMatcher:
     """The model's :class:`~torch_depth_sr.stages.BlockMatcher` (``inner``) for one stream frame: the matches
     ``previous`` (the previous frame's last, ``(dist, index)`` without gradient) are kept where ``fresh`` (B,1,H,W)
-    is False; the pixels where it is True are searched by ``inner`` on bands of rows. It stands where the model's
+    is False; the pixels where it is True are searched by ``inner`` (module docstring). It stands where the model's
     matcher stands (``obs.block_matcher``): x⁰'s matches (a call) and a scheduled layer's (:meth:`rematch`).
     ``weights``: the previous matches' softmax weights and the temperature they were made at, kept where nothing is
     searched when the temperature is the same and no gradient is wanted. The first call writes into ``previous``
@@ -139,17 +148,6 @@ class StreamMatcher:
             if weights is None:
                 return finish(dist.detach(), index, self.temperature)
             return BlockMatches(dist, index, weights)
-        h, w = x.shape[-2:]
-        s = self.settings
-        window, k = s.window_and_k()[obs.task]
-        k_full = min(k, candidates_everywhere(h, w, window, s.include_self))
-        boxes = crops(self.fresh, search_radius(s, obs.task))
-        area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
-        thin = any(min(k, candidates_everywhere(r.stop - r.start, c.stop - c.start, window, s.include_self))
-                   != k_full for r, c, _, _ in boxes)
-        if area >= 0.8 * h * w or thin:  # nearly everything, or a crop too small for k candidates: whole image
-            full = slice(0, h), slice(0, w)
-            boxes = [(*full, *full)]
         # the frame's first call writes into the kept lists (the previous frame needs them no more: a whole frame's
         # copy of k planes cost more than its search of a few crops at 1.5 MP); a later one (a re-matching layer)
         # into a copy, so that the matches an earlier call returned stay as they were
@@ -157,6 +155,19 @@ class StreamMatcher:
             dist, index = dist.clone(), index.clone()
             weights = None if weights is None else weights.clone()
         self._owned = False
+        if previous is None and self._search_fresh(x, obs, q, dist, index):
+            return self._finish(dist, index, weights)
+        h, w = x.shape[-2:]
+        s = self.settings
+        window, k = s.window_and_k()[obs.task]
+        k_full = min(k, candidates_everywhere(h, w, window, s.include_self))
+        boxes = crops(self.fresh, search_radius(s, obs.task), align=s.block_size)
+        area = sum((r.stop - r.start) * (c.stop - c.start) for r, c, _, _ in boxes)
+        thin = any(min(k, candidates_everywhere(r.stop - r.start, c.stop - c.start, window, s.include_self))
+                   != k_full for r, c, _, _ in boxes)
+        if area >= 0.8 * h * w or thin:  # nearly everything, or a crop too small for k candidates: whole image
+            full = slice(0, h), slice(0, w)
+            boxes = [(*full, *full)]
         q_full = q if q.shape[-2:] == (h, w) else None
         for rows, cols, core_r, core_c in boxes:
             crop_obs = replace(obs, rgb=None if obs.rgb is None else obs.rgb[..., rows, cols])
@@ -179,6 +190,30 @@ class StreamMatcher:
                 weights[..., core_r, core_c] = torch.where(fresh, core, weights[..., core_r, core_c])
         if weights is None:
             return finish(dist.detach(), index, self.temperature)  # the weights at the current temperature (it learns)
+        return BlockMatches(dist.detach(), index, weights)
+
+    def _search_fresh(self, x: torch.Tensor, obs: Observation, q: torch.Tensor, dist: torch.Tensor,
+                      index: torch.Tensor) -> bool:
+        """x⁰'s exact search at the fresh pixels alone, into ``dist`` and ``index`` (the whole image's matches
+        there; on the CPU's kernel, :meth:`BlockMatcher.search_at`): no crops, whose rows the kernel's block sums
+        would start elsewhere. False where it does not run."""
+        window, k = self.settings.window_and_k()[obs.task]
+        h, w = x.shape[-2:]
+        if dist.shape[1] != min(k, candidates_everywhere(h, w, window, self.settings.include_self)):
+            return False
+        if not self.inner.search_at(x, obs, q, self.fresh, dist, index):
+            return False
+        self.searched += int(self.fresh.sum())
+        return True
+
+    def _finish(self, dist: torch.Tensor, index: torch.Tensor, weights: Optional[torch.Tensor]) -> BlockMatches:
+        """The matches with their weights: the kept ones where nothing was searched (when they hold), the softmax
+        of the fresh pixels' lists there."""
+        if weights is None:
+            return finish(dist.detach(), index, self.temperature)
+        at = self.fresh[:, 0]  # (B, H, W): the fresh pixels' lists as rows (N, k)
+        lists = dist.permute(0, 2, 3, 1)[at].T[None, ..., None]  # (1, k, N, 1)
+        weights.permute(0, 2, 3, 1)[at] = finish(lists, lists, self.temperature).weight[0, ..., 0].T
         return BlockMatches(dist.detach(), index, weights)
 
     def _weights_hold(self, dist: torch.Tensor) -> bool:
