@@ -604,7 +604,7 @@ def block_match_cpu_exact_at(depth: torch.Tensor, rgb: Optional[torch.Tensor], t
     bsz, _, h, w = depth.shape
     planes = padded_planes(depth, rgb, trust, block_size // 2, search_window // 2)
     search(planes, h, w, block_size, search_window, rho, include_self, None, 1, None, None, False,
-           out=(dist.numpy(), index.numpy()), where=where.detach().reshape(bsz, h, w).numpy())
+           out=(dist.detach().numpy(), index.numpy()), where=where.detach().reshape(bsz, h, w).numpy())
 
 
 def block_match_cpu_exact(depth: torch.Tensor, rgb: Optional[torch.Tensor], trust: Optional[torch.Tensor],

@@ -149,7 +149,7 @@ class StreamMatcher:
                 return finish(dist.detach(), index, self.temperature)
             return BlockMatches(dist, index, weights)
         # the frame's first call writes into the kept lists (the previous frame needs them no more: a whole frame's
-        # copy of k planes cost more than its search of a few crops at 1.5 MP); a later one (a re-matching layer)
+        # copy of k planes cost more than its search of the fresh pixels at 1.5 MP); a later one (a re-matching layer)
         # into a copy, so that the matches an earlier call returned stay as they were
         if not self._owned:
             dist, index = dist.clone(), index.clone()
@@ -195,8 +195,8 @@ class StreamMatcher:
     def _search_fresh(self, x: torch.Tensor, obs: Observation, q: torch.Tensor, dist: torch.Tensor,
                       index: torch.Tensor) -> bool:
         """x⁰'s exact search at the fresh pixels alone, into ``dist`` and ``index`` (the whole image's matches
-        there; on the CPU's kernel, :meth:`BlockMatcher.search_at`): no crops, whose rows the kernel's block sums
-        would start elsewhere. False where it does not run."""
+        there; on the CPU's kernel, :meth:`BlockMatcher.search_at`), not the crops, which search their padding and
+        the gaps between the fresh pixels too. False where it does not run."""
         window, k = self.settings.window_and_k()[obs.task]
         h, w = x.shape[-2:]
         if dist.shape[1] != min(k, candidates_everywhere(h, w, window, self.settings.include_self)):
@@ -213,6 +213,7 @@ class StreamMatcher:
             return finish(dist.detach(), index, self.temperature)
         at = self.fresh[:, 0]  # (B, H, W): the fresh pixels' lists as rows (N, k)
         lists = dist.permute(0, 2, 3, 1)[at].T[None, ..., None]  # (1, k, N, 1)
+        # finish's softmax over k (its index argument is only passed through)
         weights.permute(0, 2, 3, 1)[at] = finish(lists, lists, self.temperature).weight[0, ..., 0].T
         return BlockMatches(dist.detach(), index, weights)
 
