@@ -568,6 +568,33 @@ def test_kept_match_weights_are_the_softmax_again_and_skipped_when_the_temperatu
     assert torch.equal(cached.weight[outside], fresh.weight[outside])
 
 
+def test_a_batch_of_streams_searches_each_samples_fresh_pixels_and_keeps_the_others():
+    """Two streams in a batch, fresh at different pixels: each sample's fresh pixels get the whole batch image's
+    matches and their softmax, the other pixels keep their matches and weights."""
+    from torch_depth_sr.observation import observe
+    from torch_depth_sr.operators import Identity
+    from torch_depth_sr.stream import StreamMatcher
+
+    m = DepthRestorer(block_matching={"search_window": 9, "k": 8})
+    gt, rgb = _scene()
+    y = torch.from_numpy(np.stack([_noisy(gt, t, holes=0.0) for t in (0, 1)]).astype(np.float32))[:, None]
+    c = torch.from_numpy(rgb)[None].expand(2, -1, -1, -1)
+    obs = observe(y, torch.ones_like(y), c, Identity(), None, True, m.block_matcher, False)
+    with torch.no_grad():
+        full = m.block_matcher(obs.y, obs, obs.observed)
+        fresh = torch.zeros_like(y, dtype=torch.bool)
+        fresh[0, :, 4:9, 3:20] = True
+        fresh[1, :, 20:31, 25:29] = True
+        stale = torch.full_like(full.weight, 0.5)  # not a softmax: the kept weights show where they stay
+        made_at = m.block_matcher.temperature.detach().clone()
+        kept = (full.dist.flip(1).contiguous(), full.index.flip(1).contiguous())
+        mix = StreamMatcher(m.block_matcher, kept, fresh, (stale.clone(), made_at))(obs.y, obs, obs.observed)
+    f = fresh.expand_as(full.index)
+    assert torch.equal(mix.index[f], full.index[f]) and torch.equal(mix.dist[f], full.dist[f])
+    assert torch.allclose(mix.weight[f], full.weight[f], rtol=1e-6, atol=1e-7)
+    assert torch.equal(mix.index[~f], full.index.flip(1)[~f]) and bool((mix.weight[~f] == 0.5).all())
+
+
 def test_a_static_stream_keeps_its_scale_policy_and_a_changed_one_estimates_it_again(monkeypatch):
     """keep_scale: while most of the previous frame was static a frame is normalised with the previous frame's
     offset, scale range and grid step, its noise level a running mean of quarter-row estimates; a frame after a
