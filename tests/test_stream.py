@@ -568,13 +568,18 @@ def test_kept_match_weights_are_the_softmax_again_and_skipped_when_the_temperatu
     assert torch.equal(cached.weight[outside], fresh.weight[outside])
 
 
-def test_a_batch_of_streams_searches_each_samples_fresh_pixels_and_keeps_the_others():
+@pytest.mark.parametrize("search", ["masked", "crops"])
+def test_a_batch_of_streams_searches_each_samples_fresh_pixels_and_keeps_the_others(monkeypatch, search):
     """Two streams in a batch, fresh at different pixels: each sample's fresh pixels get the whole batch image's
-    matches and their softmax, the other pixels keep their matches and weights."""
+    matches and their softmax, the other pixels keep their matches and weights; by the CPU's masked search, and by
+    the crops that run where it does not (another device)."""
     from torch_depth_sr.observation import observe
     from torch_depth_sr.operators import Identity
+    from torch_depth_sr.stages import BlockMatcher
     from torch_depth_sr.stream import StreamMatcher
 
+    if search == "crops":
+        monkeypatch.setattr(BlockMatcher, "search_at", lambda *a, **k: False)
     m = DepthRestorer(block_matching={"search_window": 9, "k": 8})
     gt, rgb = _scene()
     y = torch.from_numpy(np.stack([_noisy(gt, t, holes=0.0) for t in (0, 1)]).astype(np.float32))[:, None]

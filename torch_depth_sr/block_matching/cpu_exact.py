@@ -544,13 +544,12 @@ def search(planes, h, w, block_size, search_window, rho, include_self, chunk_row
     # than 32 ran the search ~15 % faster (the shifts of the insertions themselves are cheap, a heap did not help)
     fit = (2 << 20) // (w * k * (xp.itemsize + 4))
     rows = chunk_rows or max(8, min(32, -(-h // max(1, torch.get_num_threads())), fit))
-    if where is None:
-        bands = [(b, h0, min(h, h0 + rows), 0, w) for b in range(bsz) for h0 in range(0, h, rows)]
-        only = np.zeros((bsz, 0, 0), np.uint8)
-    else:  # the windows of the pixels, or the whole image's bands where they would cover most of it
-        bands = _windows(where, min(rows, _WINDOW_ROWS), search_window // 2)
-        if sum((h1 - h0) * (wb - wa) for _, h0, h1, wa, wb in bands) >= 0.8 * bsz * h * w:
-            bands = [(b, h0, min(h, h0 + rows), 0, w) for b in range(bsz) for h0 in range(0, h, rows)]
+    bands = [(b, h0, min(h, h0 + rows), 0, w) for b in range(bsz) for h0 in range(0, h, rows)]  # the whole image
+    only = np.zeros((bsz, 0, 0), np.uint8)
+    if where is not None:  # the windows of the pixels, unless they would cover most of the image
+        windows = _windows(where, min(rows, _WINDOW_ROWS), search_window // 2)
+        if sum((h1 - h0) * (wb - wa) for _, h0, h1, wa, wb in windows) < 0.8 * bsz * h * w:
+            bands = windows
         only = np.ascontiguousarray(where, dtype=np.uint8)
     nc, nb = max(1, cp.shape[1]), float(block_size * block_size)
     consts = np.array([[rb / nc, rb / (nc * nb), 1.0 / nb, 1.0, 0.0] for rb in rho.detach().cpu().double().tolist()],

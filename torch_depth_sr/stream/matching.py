@@ -155,8 +155,13 @@ class StreamMatcher:
             dist, index = dist.clone(), index.clone()
             weights = None if weights is None else weights.clone()
         self._owned = False
-        if previous is None and self._search_fresh(x, obs, q, dist, index):
-            return self._finish(dist, index, weights)
+        if previous is not None or not self._search_fresh(x, obs, q, dist, index):
+            self._search_crops(x, obs, q, previous, dist, index)
+        return self._finish(dist, index, weights)
+
+    def _search_crops(self, x: torch.Tensor, obs: Observation, q: torch.Tensor, previous: Optional[BlockMatches],
+                      dist: torch.Tensor, index: torch.Tensor) -> None:
+        """The fresh pixels' matches searched by ``inner`` on crops around them, pasted into ``dist`` and ``index``."""
         h, w = x.shape[-2:]
         s = self.settings
         window, k = s.window_and_k()[obs.task]
@@ -184,23 +189,12 @@ class StreamMatcher:
             dist[..., core_r, core_c] = torch.where(fresh, m.dist[..., inner[0], inner[1]].to(dist.dtype),
                                                     dist[..., core_r, core_c])
             index[..., core_r, core_c] = torch.where(fresh, found, index[..., core_r, core_c])
-            if weights is not None:  # the softmax is per pixel: the core's is the whole frame's (to the last bit
-                # of torch's vectorised exp, which the layout can change)
-                core = finish(dist[..., core_r, core_c], index[..., core_r, core_c], self.temperature).weight
-                weights[..., core_r, core_c] = torch.where(fresh, core, weights[..., core_r, core_c])
-        if weights is None:
-            return finish(dist.detach(), index, self.temperature)  # the weights at the current temperature (it learns)
-        return BlockMatches(dist.detach(), index, weights)
 
     def _search_fresh(self, x: torch.Tensor, obs: Observation, q: torch.Tensor, dist: torch.Tensor,
                       index: torch.Tensor) -> bool:
         """x⁰'s exact search at the fresh pixels alone, into ``dist`` and ``index`` (the whole image's matches
         there; on the CPU's kernel, :meth:`BlockMatcher.search_at`), not the crops, which search their padding and
         the gaps between the fresh pixels too. False where it does not run."""
-        window, k = self.settings.window_and_k()[obs.task]
-        h, w = x.shape[-2:]
-        if dist.shape[1] != min(k, candidates_everywhere(h, w, window, self.settings.include_self)):
-            return False
         if not self.inner.search_at(x, obs, q, self.fresh, dist, index):
             return False
         self.searched += int(self.fresh.sum())
@@ -208,7 +202,9 @@ class StreamMatcher:
 
     def _finish(self, dist: torch.Tensor, index: torch.Tensor, weights: Optional[torch.Tensor]) -> BlockMatches:
         """The matches with their weights: the kept ones where nothing was searched (when they hold), the softmax
-        of the fresh pixels' lists there."""
+        of the fresh pixels' lists there (it is per pixel: the whole frame's, to the last bit of torch's vectorised
+        exp, which the layout can change); without kept weights the softmax everywhere, at the current temperature
+        (it learns)."""
         if weights is None:
             return finish(dist.detach(), index, self.temperature)
         at = self.fresh[:, 0]  # (B, H, W): the fresh pixels' lists as rows (N, k)
