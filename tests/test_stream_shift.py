@@ -65,6 +65,28 @@ def test_the_kernel_equals_the_torch_path(monkeypatch, dtype, shape):
         assert bool(ref.any()) and not bool(ref.all())  # the test compares verdicts of both kinds
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("ratio", [0.25, 0.5, 0.9, 1.0])
+def test_the_kernel_equals_the_torch_path_with_flying_pixels(monkeypatch, dtype, ratio):
+    """Impulses on a still surface and an edge that moved: the kernel skips a window whose pixels' smallest errors
+    over the shifts already reach the bound, the torch path sums every shift; the verdicts are the same."""
+    g = torch.Generator().manual_seed(int(100 * ratio))
+    shape = (2, 1, 48, 64)
+    previous = 500 + 40 * torch.rand(shape, generator=g, dtype=dtype)
+    previous[..., 20:] += 300  # a depth edge
+    now = previous + torch.randn(shape, generator=g, dtype=dtype)
+    now[0, :, 20:] = previous[0, :, 19:-1] + torch.randn((1, 28, 64), generator=g, dtype=dtype)  # moved by a row
+    flying = torch.rand(shape, generator=g) < 0.02
+    now = torch.where(flying, now + 150 * torch.rand(shape, generator=g, dtype=dtype), now)
+    observed = (torch.rand(shape, generator=g) > 0.1).to(dtype)
+    noise = torch.full(shape, 4.0, dtype=dtype)
+    out = shifted_windows(now, observed, previous, noise, ratio)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = shifted_windows(now, observed, previous, noise, ratio)
+    assert torch.equal(out, ref)
+    assert bool(ref[0].any()) and not bool(ref.all())
+
+
 def test_unmeasured_pixels_are_never_marked():
     previous, now = _step_edge(column=12), _step_edge(column=13)
     observed = torch.ones_like(now)
