@@ -3,6 +3,7 @@
 TV + nonlocal self-similarity + sparse outliers with singular-pixel detection, solved by
 half-quadratic splitting; see ``DepthRestorer`` and ``restore_depth``.
 """
+from . import _openmp  # noqa: F401  (first: it chooses how long torch's OpenMP threads spin, before torch loads)
 from .block_matching import BlockMatches, block_match, gather_neighbors, refine_matches
 from .config import RestorerConfig
 from .errors import DepthSRError, DTypeError, InvalidDepthError, ModelFileError, ParameterError, ShapeError
