@@ -3,10 +3,10 @@
 Between two parallel torch operations, libgomp's idle threads spin for a while (``GOMP_SPINCOUNT``, 300 000 by
 default) before they sleep. This library's numba kernels run on threads of their own
 (:func:`~torch_depth_sr.native.run_tasks`), so a kernel that starts after a torch operation shares a core with a
-spinning thread. On this project's 2-core machine a spin count of 10 000 made the ``fast`` tier's 640×480 frame 16 %
-faster and the ``default`` tier's 14 %; kornia's joint bilateral filter, torch alone, 8 % faster too. Not spinning at
-all (``OMP_WAIT_POLICY=PASSIVE``) was as fast for the tiers but 20 % slower for kornia's filter: a sleeping thread
-wakes later for the next operation (``docs/measurements/openmp-wait-policy/``).
+spinning thread. On this project's 2-core machine a spin count of 10 000 made the ``fast`` and ``default`` tiers'
+640×480 frames 13–15 % faster and a moving stream step 24 %; kornia's joint bilateral filter, torch alone, took about
+the same time. Not spinning at all (``OMP_WAIT_POLICY=PASSIVE``) was about as fast for the tiers but 20–30 % slower for
+kornia's filter: a sleeping thread wakes later for the next operation (``docs/measurements/openmp-wait-policy/``).
 
 libgomp (torch's OpenMP on Linux) reads the count once, when torch loads it (``import torch``). So this module,
 imported by the package before torch, sets ``GOMP_SPINCOUNT=10000`` only when torch is not loaded yet and neither
