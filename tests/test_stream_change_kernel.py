@@ -1,9 +1,9 @@
-"""The change test's nearest distances and dilation: the numba kernels (stream/change_kernel.py) give the torch
-path's results bit for bit."""
+"""The change test's nearest distances, votes and colour change: the numba kernels (stream/change_kernel.py) give the
+torch path's results bit for bit."""
 import pytest
 import torch
 
-from torch_depth_sr.stream import change, matching
+from torch_depth_sr.stream import change
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
@@ -19,17 +19,6 @@ def test_nearest_distance_kernel_equals_torch(monkeypatch, dtype, shape, per_pix
     monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
     ref = change.distances(y, observed, previous, noise)[1]
     assert out.dtype == dtype and out.shape == ref.shape and torch.equal(out, ref)
-
-
-@pytest.mark.parametrize("shape", [(1, 1, 1, 1), (1, 1, 5, 3), (2, 1, 40, 150), (1, 2, 70, 9)])
-@pytest.mark.parametrize("radius", [1, 3, 8])
-def test_dilate_kernel_equals_torch(monkeypatch, shape, radius):
-    mask = torch.rand(shape, generator=torch.Generator().manual_seed(radius)) > 0.97
-    out = matching.dilate(mask, radius)
-    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
-    ref = matching.dilate(mask, radius)
-    assert out.dtype == torch.bool and torch.equal(out, ref)
-    assert bool(ref[mask].all())  # the set pixels stay set
 
 
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
@@ -69,7 +58,7 @@ def test_the_kernel_gate_takes_the_torch_path_for_gradients_other_dtypes_and_the
     assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x, x.clone().requires_grad_()) is None
     with torch.no_grad():
         assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x.clone().requires_grad_()) is not None
-    assert native.host_kernel("stream.change_kernel", "dilate_cpu", x > 0.5, dtypes=(torch.bool,)) is not None
+    assert native.host_kernel("dilate_kernel", "dilate_cpu", x > 0.5, dtypes=(torch.bool,)) is not None
     monkeypatch.setenv("TORCH_DEPTH_SR_DEVICE_PATH", "1")
     assert native.host_kernel("stream.box_kernel", "box_mean_cpu", x) is None
 
@@ -102,15 +91,3 @@ def test_camera_moved_kernel_equals_torch_to_float32_rounding(monkeypatch, dtype
     assert torch.allclose(out, ref, rtol=1e-5, atol=0)
     if shift != (0, 0) and shape[-1] > 6:
         assert bool((ref < 0.8).all())  # a shifted image: the camera moved
-
-
-@pytest.mark.parametrize("where", [(), ((3, 4),), ((0, 0), (2, 70)), ((55, 140), (57, 149))])
-@pytest.mark.parametrize("radius", [1, 4])
-def test_dilate_kernel_of_a_sparse_mask_equals_torch(monkeypatch, where, radius):
-    """Mostly empty masks (a stream's): the kernel counts only the box around the set pixels."""
-    mask = torch.zeros(2, 1, 60, 150, dtype=torch.bool)
-    for i, (r, c) in enumerate(where):
-        mask[i % 2, 0, r, c] = True
-    out = matching.dilate(mask, radius)
-    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
-    assert torch.equal(out, matching.dilate(mask, radius))

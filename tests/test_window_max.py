@@ -1,8 +1,10 @@
-"""window_max: the separable window maximum equals torch's max_pool2d bit for bit, and keeps its gradient."""
+"""window_max: the separable window maximum equals torch's max_pool2d bit for bit, and keeps its gradient; the
+bool dilation's numba kernel (dilate_kernel.py) gives the torch path's mask."""
 import pytest
 import torch
 import torch.nn.functional as F
 
+from torch_depth_sr import window_max
 from torch_depth_sr.window_max import max_filter, min_filter
 
 
@@ -32,3 +34,26 @@ def test_input_not_modified():
     before = x.clone()
     min_filter(max_filter(x, 5), 3)
     assert torch.equal(x, before)
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 1, 1), (1, 1, 5, 3), (2, 1, 40, 150), (1, 2, 70, 9)])
+@pytest.mark.parametrize("radius", [1, 3, 8])
+def test_dilate_kernel_equals_torch(monkeypatch, shape, radius):
+    mask = torch.rand(shape, generator=torch.Generator().manual_seed(radius)) > 0.97
+    out = window_max.dilate(mask, radius)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    ref = window_max.dilate(mask, radius)
+    assert out.dtype == torch.bool and torch.equal(out, ref)
+    assert bool(ref[mask].all())  # the set pixels stay set
+
+
+@pytest.mark.parametrize("where", [(), ((3, 4),), ((0, 0), (2, 70)), ((55, 140), (57, 149))])
+@pytest.mark.parametrize("radius", [1, 4])
+def test_dilate_kernel_of_a_sparse_mask_equals_torch(monkeypatch, where, radius):
+    """Mostly empty masks (a stream's), set pixels at the border."""
+    mask = torch.zeros(2, 1, 60, 150, dtype=torch.bool)
+    for i, (r, c) in enumerate(where):
+        mask[i % 2, 0, r, c] = True
+    out = window_max.dilate(mask, radius)
+    monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    assert torch.equal(out, window_max.dilate(mask, radius))

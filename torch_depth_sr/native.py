@@ -51,9 +51,9 @@ _FAILED: Optional[str] = None  # why numba is unavailable, once known
 _CONFIGURED = False
 _LOG = logging.getLogger("torch_depth_sr")
 # the kernel modules (under torch_depth_sr) whose numba functions warmup compiles and the notice watches
-KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "domain_kernel", "edge_snap_kernel",
-                  "fill_kernel", "nonlocal_kernel", "singular_kernel", "stream.box_kernel", "stream.change_kernel",
-                  "stream.matches_kernel", "stream.runs_kernel", "stream.shift_kernel")
+KERNEL_MODULES = ("block_matching.cpu_exact", "block_matching.refine_cpu", "dilate_kernel", "domain_kernel",
+                  "edge_snap_kernel", "fill_kernel", "nonlocal_kernel", "singular_kernel", "stream.box_kernel",
+                  "stream.change_kernel", "stream.matches_kernel", "stream.runs_kernel", "stream.shift_kernel")
 COMPILE_SECONDS = 22  # the kernels of a float32 forward: 20-25 s of CPU at 320x240 on this project's 2-core machine
 # (docs/measurements/issue27-tiers/fifteenth-stop/first_forward_fresh_cache.txt; 13 s when first measured)
 _NOTICE = {"given": False, "quiet": False}  # the first-compile notice: once per process; not during warmup

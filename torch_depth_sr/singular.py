@@ -30,7 +30,7 @@ from ._checks import check_4d, check_per_sample, check_same_hw
 from .block_matching import BlockMatches, gather_neighbors
 from .errors import DepthSRError
 from .native import cpu_kernel, host_kernel, host_path
-from .window_max import max_filter
+from .window_max import dilate
 
 __all__ = ["detect_singular", "neighbour_support", "line_support"]
 
@@ -180,10 +180,10 @@ def _rounds_needed(region: torch.Tensor, rounds: int, reach: int) -> torch.Tenso
     round ``r − 1`` at its matched centres, within ``reach`` px: ``rounds`` in the region, one fewer per ``reach`` px
     farther from it."""
     need = region.to(torch.uint8)
-    grown = region.to(torch.float32)
+    grown = region
     for _ in range(rounds - 1):
-        grown = max_filter(grown, 2 * reach + 1)
-        need = need + (grown > 0).to(torch.uint8)
+        grown = dilate(grown, reach)
+        need = need + grown.to(torch.uint8)
     return need
 
 

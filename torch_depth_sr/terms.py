@@ -30,7 +30,7 @@ from .operators import grad_adjoint
 from .shrinkage import group_soft_threshold, soft_threshold
 from .stages import SingularDetector
 from .state import RestorationState, stage
-from .window_max import max_filter
+from .window_max import dilate
 
 __all__ = ["GuidedPriorTerm", "LayerStep", "MatchReader", "NonlocalTerm", "OutlierTerm", "Rematch", "SingularTest",
            "System", "TVTerm", "TemporalPriorTerm", "Term", "ValuePriorTerm"]
@@ -212,7 +212,7 @@ class MatchReader(nn.Module):
         with stage(obs.log.timings, "nonlocal", x.device):
             # with an update region, the x-update reads α one pixel beyond it (Dᵀ) and W, x̄ in it: the kernel
             # computes those pixels alone
-            region = None if obs.update_region is None else max_filter(obs.update_region.to(x.dtype), 3) > 0
+            region = None if obs.update_region is None else dilate(obs.update_region, 1)
             alpha, diag, target = nonlocal_terms(
                 x, self._gradient(step), step.matches, value_weight=self.value_weight, max_var=vp.var,
                 max_offset=vp.offset, plane_ridge=vp.ridge, range_sigma=self._range(clean), region=region)

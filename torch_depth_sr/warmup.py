@@ -20,9 +20,9 @@ from .operators import grad
 from .singular import detect_singular, supported_or_line
 from .stream.change import _nearest_distance as nearest_distance
 from .stream.change import camera_moved, colour_changes, depth_votes, local_spread, remembered_spread
-from .stream.matching import dilate
 from .stream.shift import shifted_windows
 from .stream.runs import grow_runs, join_runs
+from .window_max import dilate
 
 __all__ = ["warmup"]
 

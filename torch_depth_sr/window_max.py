@@ -1,4 +1,5 @@
-"""The maximum (and minimum) over a square window, as ``F.max_pool2d(x, size, stride=1, padding)`` computes it.
+"""The maximum (and minimum) over a square window, as ``F.max_pool2d(x, size, stride=1, padding)`` computes it, and
+the dilation of a bool mask.
 
 With stride 1 torch's CPU ``max_pool2d`` visits every window anew and records the argmax: 10 ms for a 3×3 window and
 20 ms for 5×5 on one 640×480 map (2 threads), against 0.3 and 0.7 ms for the same values taken as a maximum of shifted
@@ -11,7 +12,9 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-__all__ = ["max_filter", "min_filter"]
+from .native import host_kernel
+
+__all__ = ["dilate", "max_filter", "min_filter"]
 
 
 def _shifted_max(x: torch.Tensor, size: int, dim: int, pad: int) -> torch.Tensor:
@@ -40,3 +43,14 @@ def max_filter(x: torch.Tensor, size: int, padding: int = -1) -> torch.Tensor:
 def min_filter(x: torch.Tensor, size: int, padding: int = -1) -> torch.Tensor:
     """``-F.max_pool2d(-x, size, stride=1, padding=padding)``: the window minimum, as :func:`max_filter`."""
     return -max_filter(-x, size, padding)
+
+
+def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:
+    """``mask`` (B,C,H,W) bool grown by a square of ``radius`` px: ``max_filter`` of its 0/1 values above 0, on the
+    CPU by a numba kernel (:mod:`~torch_depth_sr.dilate_kernel`, the same mask)."""
+    if radius <= 0:
+        return mask
+    kernel = host_kernel("dilate_kernel", "dilate_cpu", mask, dtypes=(torch.bool,))
+    if kernel is not None:
+        return kernel(mask, radius)
+    return max_filter(mask.to(torch.float32), 2 * radius + 1) > 0

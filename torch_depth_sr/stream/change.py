@@ -41,7 +41,7 @@ import torch.nn.functional as F
 from ..config import StreamConfig
 from ..native import host_kernel
 from ..selection import lower_median
-from .matching import dilate
+from ..window_max import dilate
 from .shift import shifted_windows
 
 __all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "colour_changes", "depth_votes", "distances",

@@ -1,16 +1,15 @@
 """The steps of a stream's change test as numba kernels: the distance to the nearest previous value
 (:func:`~torch_depth_sr.stream.change.distances`' ``d1``), the depth votes
-(:func:`~torch_depth_sr.stream.change.depth_votes`), the dilation of a mask
-(:func:`~torch_depth_sr.stream.matching.dilate`), the colour change (:func:`~torch_depth_sr.stream.change.colour_changes`)
-and the camera test's shifted differences (:func:`~torch_depth_sr.stream.change.camera_moved`).
+(:func:`~torch_depth_sr.stream.change.depth_votes`), the colour change
+(:func:`~torch_depth_sr.stream.change.colour_changes`) and the camera test's shifted differences
+(:func:`~torch_depth_sr.stream.change.camera_moved`).
 
 In torch each is a chain of whole-frame operations, each with a temporary: ``d1`` is 8 differences, 8 absolute values
-and 8 minima over a padded copy, then a division and a selection; a dilation is a float copy of the mask and a
-running maximum of ``2·radius`` shifted planes per axis. At 1376×1088 the two took about 0.1 s of a 2.6 s stream
-step, the votes' 0/1 planes and their window means about 0.08 s more. Here ``d1`` is one pass. The votes are formed
-from the window counts of the far and the measured pixels (:func:`_window_counts`: a row pass, then bands of columns)
-with the torch path's roundings (the torch path's float64 window sums of 0/1 values are those integers). A dilation
-is a running count along the rows and then down the columns, on one thread. The colour change and each pixel's own change are one pass over the channels. The same
+and 8 minima over a padded copy, then a division and a selection. At 1376×1088 it and the mask dilations took about
+0.1 s of a 2.6 s stream step, the votes' 0/1 planes and their window means about 0.08 s more. Here ``d1`` is one pass.
+The votes are formed from the window counts of the far and the measured pixels (:func:`_window_counts`: a row pass,
+then bands of columns) with the torch path's roundings (the torch path's float64 window sums of 0/1 values are those
+integers). The colour change and each pixel's own change are one pass over the channels. The same
 arithmetic as torch throughout (a difference, its absolute value, the smallest, one division in the frame's dtype),
 so the results are the torch path's bit for bit (tested) — except the camera test's 25 sums, taken in float64 and
 reassociated (vectorised): they agree with torch's float32 means to float32 rounding. Rows and bands split across
@@ -24,7 +23,7 @@ from numba import njit
 
 from ..native import run_range
 
-__all__ = ["colour_change_cpu", "dilate_cpu", "nearest_distance_cpu", "shift_changes_cpu", "votes_cpu"]
+__all__ = ["colour_change_cpu", "nearest_distance_cpu", "shift_changes_cpu", "votes_cpu"]
 
 _BAND = 64  # columns per task of the dilation's column pass
 _MIN_ROWS = 16  # rows per task below which one thread does them
@@ -115,49 +114,6 @@ def _window_counts(planes: torch.Tensor, radius: int) -> np.ndarray:
     bands = -(-w // _BAND)
     run_range(_count_columns, a.shape[0] * bands, rows, int(radius), bands, out)
     return out
-
-
-@njit(cache=True, nogil=True)
-def _dilate(planes, radius, out):
-    """``out (P,H,W)`` bool: a set pixel of ``planes (P,H,W)`` uint8 within ``radius`` px (a square clipped to the
-    image). A running count along each row, then one down the columns over the rows' verdicts: two passes, one
-    thread (the thread pool's hand-over cost more than the work at 640×480)."""
-    n, h, w = planes.shape
-    rows = np.empty((h, w), dtype=np.uint8)
-    count = np.empty(w, dtype=np.int32)
-    for p in range(n):
-        for i in range(h):
-            c = 0
-            for j in range(min(radius, w)):
-                c += planes[p, i, j]
-            for j in range(w):
-                if j + radius < w:
-                    c += planes[p, i, j + radius]
-                if j > radius:
-                    c -= planes[p, i, j - radius - 1]
-                rows[i, j] = c > 0
-        count[:] = 0
-        for i in range(min(radius, h)):
-            for j in range(w):
-                count[j] += rows[i, j]
-        for i in range(h):
-            if i + radius < h:
-                for j in range(w):
-                    count[j] += rows[i + radius, j]
-            if i > radius:
-                for j in range(w):
-                    count[j] -= rows[i - radius - 1, j]
-            for j in range(w):
-                out[p, i, j] = count[j] > 0
-
-
-def dilate_cpu(mask: torch.Tensor, radius: int) -> torch.Tensor:
-    """``dilate(mask, radius)`` of a (B,C,H,W) bool mask on the CPU: grown by a square of ``radius`` px."""
-    h, w = mask.shape[-2:]
-    planes = np.ascontiguousarray(mask.detach().reshape(-1, h, w).numpy()).view(np.uint8)
-    out = np.empty(planes.shape, dtype=np.bool_)
-    _dilate(planes, int(radius), out)
-    return torch.from_numpy(out).view(mask.shape)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

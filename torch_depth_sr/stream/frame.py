@@ -47,9 +47,10 @@ from ..noise import sampled_noise_sigma
 from ..observation import Observation, ScalePolicy
 from ..stages import supported_pixels
 from ..state import RestorationState
+from ..window_max import dilate
 from .change import change_test, local_spread, remembered_spread
 from .later_layers import run_later_layers
-from .matching import StreamMatcher, dilate, search_radius
+from .matching import StreamMatcher, search_radius
 from .post_hold import run_post_steps
 from .runs import grow_runs, join_runs
 

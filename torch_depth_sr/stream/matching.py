@@ -29,7 +29,7 @@ from ..observation import Observation
 from ..stages import BlockMatcher
 from ..window_max import max_filter
 
-__all__ = ["StreamMatcher", "crop_matches", "crops", "dilate", "search_radius"]
+__all__ = ["StreamMatcher", "crop_matches", "crops", "search_radius"]
 
 
 def search_radius(settings: BlockMatchingConfig, task: str) -> int:
@@ -223,13 +223,3 @@ class StreamMatcher:
             return False
         return (weight.dtype == dist.dtype and weight.shape == dist.shape
                 and torch.equal(made_at, t.detach().to(made_at)))
-
-
-def dilate(mask: torch.Tensor, radius: int) -> torch.Tensor:
-    """``mask`` (B,1,H,W) bool grown by a square of ``radius`` px (on the CPU by a numba kernel: the same mask)."""
-    if radius <= 0:
-        return mask
-    kernel = host_kernel("stream.change_kernel", "dilate_cpu", mask, dtypes=(torch.bool,))
-    if kernel is not None:
-        return kernel(mask, radius)
-    return max_filter(mask.to(torch.float32), 2 * radius + 1) > 0

@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 
 from ..native import host_kernel, host_path
-from .matching import dilate
+from ..window_max import dilate
 
 __all__ = ["CLIP", "WINDOW", "shifted_windows"]
 

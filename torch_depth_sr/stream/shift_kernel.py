@@ -15,7 +15,7 @@ import torch
 from numba import njit
 
 from ..native import run_range
-from .change_kernel import _dilate
+from ..dilate_kernel import _dilate
 
 __all__ = ["shifted_windows_cpu"]
 

@@ -10,7 +10,7 @@ import torch
 import torch_depth_sr.stream.shift_kernel as kernel
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
-from torch_depth_sr.stream.change_kernel import _dilate
+from torch_depth_sr.dilate_kernel import _dilate
 
 
 def main() -> None:
