@@ -12,11 +12,11 @@ import numpy as np
 import torch
 from numba import njit
 
-__all__ = ["dilate_cpu"]
+__all__ = ["dilate_cpu", "dilate_planes"]
 
 
 @njit(cache=True, nogil=True)
-def _dilate(planes, radius, out):
+def dilate_planes(planes, radius, out):
     """``out (P,H,W)`` bool: a set pixel of ``planes (P,H,W)`` uint8 within ``radius`` px (a square clipped to the
     image)."""
     n, h, w = planes.shape
@@ -53,5 +53,5 @@ def dilate_cpu(mask: torch.Tensor, radius: int) -> torch.Tensor:
     h, w = mask.shape[-2:]
     planes = np.ascontiguousarray(mask.detach().reshape(-1, h, w).numpy()).view(np.uint8)
     out = np.empty(planes.shape, dtype=np.bool_)
-    _dilate(planes, int(radius), out)
+    dilate_planes(planes, int(radius), out)
     return torch.from_numpy(out).view(mask.shape)

@@ -79,12 +79,17 @@ class BlockMatcher(nn.Module):
         """Whether layer ``index`` matches again (``settings.match_layers``)."""
         return index in self.settings.match_layers
 
+    def _trust_and_window(self, x: torch.Tensor, obs: Observation, q: torch.Tensor):
+        """``(trust, window, k)`` of a search of ``x``: Q as the trust map where it lies on ``x``'s grid (Q lives on
+        the observation grid), the task's search window and k."""
+        trust = q.detach() if q.shape[-2:] == x.shape[-2:] else None
+        return (trust, *self.settings.window_and_k()[obs.task])
+
     def _run(self, search: Callable, x: torch.Tensor, obs: Observation, q: torch.Tensor,
              previous: Optional[BlockMatches]) -> BlockMatches:
         s = self.settings
         h, w = x.shape[-2:]
-        trust = q.detach() if q.shape[-2:] == (h, w) else None  # Q lives on the observation grid
-        window, k = s.window_and_k()[obs.task]
+        trust, window, k = self._trust_and_window(x, obs, q)
         # k at most the candidates every pixel has (the image corner's share of the window): a small image, or a
         # small window (the "fast" preset), gets all of them instead of an error
         k = min(k, candidates_everywhere(h, w, window, s.include_self))
@@ -108,9 +113,7 @@ class BlockMatcher(nn.Module):
         (:func:`~torch_depth_sr.block_matching.block_match_at`: the whole image's, bit for bit); False, nothing
         written, where that search does not run (off the CPU's numba kernel)."""
         s = self.settings
-        h, w = x.shape[-2:]
-        trust = q.detach() if q.shape[-2:] == (h, w) else None
-        window, _ = s.window_and_k()[obs.task]
+        trust, window, _ = self._trust_and_window(x, obs, q)
         with stage(obs.log.timings, "block_matching", x.device):
             return block_match_at(x.detach(), obs.rgb, trust, where, dist, index, block_size=s.block_size,
                                   search_window=window, color_weight=self.color_weight.detach(),

@@ -50,9 +50,9 @@ from typing import TYPE_CHECKING, Callable, Optional
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from ..errors import UsageError
+from ..window_max import dilate
 
 if TYPE_CHECKING:
     from ..model import DepthRestorer
@@ -146,18 +146,13 @@ def _filled(out: np.ndarray) -> np.ndarray:
     return res[:, 0].numpy()
 
 
-def _dilate(mask: np.ndarray, radius: int) -> np.ndarray:
-    t = torch.from_numpy(mask.astype(np.float32))[:, None]
-    return (F.max_pool2d(t, 2 * radius + 1, 1, radius)[:, 0] > 0).numpy()
-
-
 def regions(seq: dict) -> dict:
     """The scored regions of a synthetic sequence: ``static`` (H,W) and its frames, ``trail`` (T,H,W)."""
     gt, rgb, moving = seq["gt"][:, 0], seq["rgb"], seq["moving"][:, 0]
     t0 = seq["hold_from"]
     static = (gt[t0:] == gt[t0]).all(0) & (rgb[t0:] == rgb[t0]).all(0).all(0)
     recent = np.stack([moving[max(0, t - 4):t].any(0) if t else np.zeros_like(moving[0]) for t in range(len(moving))])
-    trail = _dilate(moving, 2) | recent
+    trail = dilate(torch.from_numpy(moving.astype(bool))[:, None], 2)[:, 0].numpy() | recent
     trail[0] = False
     return {"static": static, "frames": slice(t0, None), "trail": trail}
 

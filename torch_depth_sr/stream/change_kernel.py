@@ -25,7 +25,7 @@ from ..native import run_range
 
 __all__ = ["colour_change_cpu", "nearest_distance_cpu", "shift_changes_cpu", "votes_cpu"]
 
-_BAND = 64  # columns per task of the dilation's column pass
+_BAND = 64  # columns per task of the window counts' column pass
 _MIN_ROWS = 16  # rows per task below which one thread does them
 
 

@@ -27,7 +27,6 @@ from ..config import BlockMatchingConfig
 from ..native import host_kernel
 from ..observation import Observation
 from ..stages import BlockMatcher
-from ..window_max import max_filter
 
 __all__ = ["StreamMatcher", "crop_matches", "crops", "search_radius"]
 

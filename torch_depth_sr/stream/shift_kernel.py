@@ -15,7 +15,7 @@ import torch
 from numba import njit
 
 from ..native import run_range
-from ..dilate_kernel import _dilate
+from ..dilate_kernel import dilate_planes
 
 __all__ = ["shifted_windows_cpu"]
 
@@ -118,7 +118,7 @@ def shifted_windows_cpu(y: torch.Tensor, observed: torch.Tensor, previous: torch
     arrays = [np.ascontiguousarray(t.detach().reshape(b, h, w).numpy()) for t in (y, observed, previous, noise)]
     mask = np.ascontiguousarray(departs.detach().reshape(b, h, w).numpy())
     near = np.empty_like(mask)  # the pixels of the departing windows
-    _dilate(mask.view(np.uint8), half, near)
+    dilate_planes(mask.view(np.uint8), half, near)
     still, low = np.zeros((b, h, w)), np.zeros((b, h, w))
     run_range(_errors, b * h, *arrays, near, float(clip), still, low, min_share=_MIN_ROWS)
     out = np.zeros((b, h, w), dtype=np.bool_)

@@ -4,10 +4,8 @@ on a region shaped like a moving frame's fresh pixels. Run once per tree, from /
 
     cd /tmp && PYTHONPATH=/path/to/tree GOMP_SPINCOUNT=10000 python /path/to/region_timing.py
 """
-import time
-
-import numpy as np
 import torch
+from dilate_timing import median_ms  # this folder's: the script's folder is on the path
 
 from torch_depth_sr.singular import _rounds_needed
 
@@ -23,16 +21,6 @@ except ImportError:  # before this stop: terms.py dilated a float copy
         return max_filter(region.to(torch.float32), 3) > 0
 
 
-def median_ms(fn, n: int = 30) -> float:
-    fn()
-    times = []
-    for _ in range(n):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
-
-
 def main() -> None:
     torch.set_num_threads(2)
     g = torch.Generator().manual_seed(0)
@@ -40,8 +28,8 @@ def main() -> None:
     region[..., 200:325, 40:185] = True  # a mover
     region[..., 140:300, 150:165] = True  # another one's edge
     region |= torch.rand(1, 1, 370, 463, generator=g) < 0.002  # scattered young runs
-    print(f"singular rounds {median_ms(lambda: _rounds_needed(region, 2, 3)):.3f} ms, "
-          f"nonlocal region {median_ms(lambda: terms_region(region)):.3f} ms")
+    print(f"singular rounds {median_ms(lambda: _rounds_needed(region, 2, 3), 30):.3f} ms, "
+          f"nonlocal region {median_ms(lambda: terms_region(region), 30):.3f} ms")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@ import torch
 import torch_depth_sr.stream.shift_kernel as kernel
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
-from torch_depth_sr.dilate_kernel import _dilate
+from torch_depth_sr.dilate_kernel import dilate_planes
 
 
 def main() -> None:
@@ -32,7 +32,7 @@ def main() -> None:
     planes = [np.ascontiguousarray(t.reshape(b, h, w).numpy()) for t in (y, observed, previous, noise)]
     mask = np.ascontiguousarray(departs.reshape(b, h, w).numpy())
     near = np.empty_like(mask)
-    _dilate(mask.view(np.uint8), window // 2, near)
+    dilate_planes(mask.view(np.uint8), window // 2, near)
     still, low = np.zeros((b, h, w)), np.zeros((b, h, w))
     kernel._errors(0, b * h, *planes, near, float(clip), still, low)
     skipped = 0
