@@ -13,7 +13,8 @@ import torch
 from torch_depth_sr import StreamRestorer, restore_depth
 from torch_depth_sr.stream import default_stream_model
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
-from torch_depth_sr.evaluation.stream import _dilate, regions
+from torch_depth_sr.evaluation.stream import regions
+from torch_depth_sr.window_max import dilate
 
 torch.set_num_threads(1)
 names = sys.argv[1:] or ["static-busy", "static-2movers"]
@@ -34,7 +35,7 @@ for spec in STREAM_SEQUENCES:
             stream_out.append(np.asarray(res.depth, dtype=np.float64))
             static.append(np.asarray(res.static) > 0)
     frame, stream_out, static = np.stack(frame), np.stack(stream_out), np.stack(static)
-    trail, near, hole = reg["trail"], _dilate(moving, 2), depth == 0
+    trail, near, hole = reg["trail"], dilate(torch.from_numpy(moving.astype(bool))[:, None], 2)[:, 0].numpy(), depth == 0
     d = (stream_out - gt) ** 2 - (frame - gt) ** 2
     n = trail.sum()
     print(f"{spec.name}: trail RMSE frame {np.sqrt(((frame - gt)[trail] ** 2).mean()):.2f}, "

@@ -38,7 +38,7 @@ import torch_depth_sr.stream.frame as frame  # noqa: E402
 from torch_depth_sr.operators import laplacian  # noqa: E402
 from torch_depth_sr.post_steps import DenoiseRefineStep  # noqa: E402
 from torch_depth_sr.solvers.implicit import cg_solve  # noqa: E402
-from torch_depth_sr.stream.matching import dilate  # noqa: E402
+from torch_depth_sr.window_max import dilate  # noqa: E402
 
 PATCHED = [(frame, "join_runs"), (frame, "StreamMatcher"), (frame, "run_later_layers"),
            (frame.StreamFrame, "scale_policy"), (frame.StreamFrame, "post"), (stages.LinearSolver, "forward"),

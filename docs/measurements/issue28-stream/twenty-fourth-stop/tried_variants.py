@@ -48,7 +48,7 @@ from torch_depth_sr import restore_depth  # noqa: E402
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, make_sequence, recipe_sequences  # noqa: E402
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics  # noqa: E402
 from torch_depth_sr.stream import StreamRestorer, default_stream_model  # noqa: E402
-from torch_depth_sr.stream.matching import dilate  # noqa: E402
+from torch_depth_sr.window_max import dilate  # noqa: E402
 from torch_depth_sr.stream.runs import JoinedRuns  # noqa: E402
 
 SETS = {"tuning": lambda: list(TUNING_SEQUENCES),

@@ -23,7 +23,7 @@ import tried_stream_parts as tsp  # noqa: E402  (its patches table and use(); it
 import torch_depth_sr.stream.frame as frame  # noqa: E402
 from torch_depth_sr.datasets.sequences import TUNING_SEQUENCES, recipe_sequences  # noqa: E402
 from torch_depth_sr.native import host_path  # noqa: E402
-from torch_depth_sr.stream.matching import dilate  # noqa: E402
+from torch_depth_sr.window_max import dilate  # noqa: E402
 from torch_depth_sr.stream.post_hold import run_post_steps  # noqa: E402
 
 

@@ -11,7 +11,7 @@ from torch_depth_sr import StreamRestorer, restore_depth
 from torch_depth_sr.stream import default_stream_model
 from torch_depth_sr.stream import frame as R
 from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, make_sequence
-from torch_depth_sr.evaluation.stream import _dilate, regions
+from torch_depth_sr.evaluation.stream import regions
 torch.set_num_threads(1)
 CAP = {}
 fp = R._Frame._from_past
