@@ -1,17 +1,17 @@
 """Issue 28, thirty-first stop: where the drift test fires on the real static tabletop (a reporting sequence: looked
-at after the test broke its static region's figures, to say why; nothing was chosen on it).
+at after the test broke its static region's figures, to say why; the variants tried against it here were not
+shipped, nor was the test).
 
 The stream runs with the drift test at ``--clip`` (the bound on one measurement's departure, in noise units) and
 ``--test`` (z-score). For each frame: the share of the static region's pixels (the top 150 rows, which never move)
-that the drift test alone calls changed, and there the mean of ``y − m`` (the measurement minus its run's mean) in mm
-and in noise units.
+that the drift test alone calls changed, and there the mean of ``|y − m|`` (the measurement minus its run's mean) in
+the frame's normalised units and in noise units.
 
     OMP_NUM_THREADS=2 python docs/measurements/issue28-stream/thirty-first-stop/drift_on_tabletop.py --clip 1 --test 4
 
 Runs on ``e78049c`` with ``tried_drift_test.patch`` applied (the clip read from ``DRIFT_CLIP``, which this script
-sets). ``drift_on_tabletop_clip*.txt`` were run before the patch's last change (the pixels the drift test alone called
-changed remember their frame-to-frame change); with it the mean shares over the frames were the same to within 0.001
-(clip 2, test 3: 0.142; clip 1, test 4: 0.132; clip 2, test 4: 0.034).
+sets; ``DRIFT_COLOUR`` and ``DRIFT_MEMORY`` as in ``drift_on_tabletop_shares.txt``, which gives the mean shares;
+``drift_on_tabletop_clip*.txt`` the frames of two of them).
 """
 from __future__ import annotations
 
