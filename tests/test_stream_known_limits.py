@@ -38,10 +38,11 @@ def _far_off(seed: int, frames: int, settings: Optional[dict] = None, frame_by_f
 def test_join_cap_keeps_a_slow_mover_nearer_its_measurements():
     # static-2movers@202: a mover at 0.52 m advancing 1–2 px per frame over a background at 1.36 m; the change test's
     # noise unit grows to 0.3–0.5 m by the edge. Without the bound on the unit the run's mean is compared in, the
-    # mover's new measurements join the background's running mean (446 pixels over 12 frames; 243 with it), both
-    # without the shift test, which came after and finds most of this mover's edge on its own
-    (unbounded,) = _far_off(202, 12, {"join_cap": None, "shift_test": None}, frame_by_frame=False)
-    (bounded,) = _far_off(202, 12, {"shift_test": None}, frame_by_frame=False)
+    # mover's new measurements join the background's running mean (446 pixels over 12 frames, 243 with it, when
+    # written; 509 and 238 at the thirty-first stop), both without the shift test and the drift test, which came
+    # after and find much of this mover on their own
+    (unbounded,) = _far_off(202, 12, {"join_cap": None, "shift_test": None, "drift_test": None}, frame_by_frame=False)
+    (bounded,) = _far_off(202, 12, {"shift_test": None, "drift_test": None}, frame_by_frame=False)
     assert bounded < 0.7 * unbounded, (bounded, unbounded)
 
 
@@ -84,14 +85,15 @@ def _lag(outs, truth) -> float:
     return float(np.mean([np.mean(np.asarray(o)[4:-4, 4:-4] - t[4:-4, 4:-4]) for o, t in zip(outs[-8:], truth[-8:])]))
 
 
-@pytest.mark.xfail(strict=True, reason="the change test passes a slanted surface sliding a pixel a frame (its "
-                   "one-pixel tolerance), and the runs' means lag it (docs/stream.md#where-it-stops)")
-def test_a_sliding_slanted_plane_is_not_left_behind():
+@pytest.mark.xfail(strict=True, reason="the change test passes an untextured slanted surface sliding a pixel a frame "
+                   "(the depth test's one-pixel tolerance; the drift test needs the colour to change) and the runs' "
+                   "means lag it (docs/stream.md#where-it-stops)")
+def test_a_sliding_slanted_grey_plane_is_not_left_behind():
     # frame by frame follows the plane (within 0.05 mm on the mean); the stream lags it by 16 mm on the mean of the
     # last 8 frames (19 mm in the last: more than six frames' fall), since each frame's change at a pixel, 3 mm,
-    # lies within the depth test's one-pixel tolerance. The thirty-first stop's drift test (a window's measurements
-    # all on one side of their runs' means; docs/measurements/issue28-stream/thirty-first-stop/) brought it to
-    # 0.3 mm but called 13 % of the real tabletop's still region changed in every frame, and was not shipped
+    # lies within the depth test's one-pixel tolerance. The drift test sees the depth drift but counts it only where
+    # the colour changed too (a real sensor's depth drifts on a still scene: docs/measurements/issue28-stream/
+    # thirty-first-stop/), and a grey plane's colour does not; a textured one is followed (test_stream_drift.py)
     depth, truth, rgb = _sliding_plane()
     model = default_stream_model()
     with torch.no_grad():

@@ -398,7 +398,12 @@ class StreamConfig(Group):
     the camera moved and every pixel is changed. A measured pixel is changed too where its 5×5 window departs from the
     previous estimate (a pixel 4 units off, the unit at least 2 σ̂) and one of that estimate's one-pixel shifts
     matches the window with less than ``shift_test`` times the unshifted error (:mod:`~torch_depth_sr.stream.shift`:
-    an edge that moved by a pixel, which the depth test's one-pixel tolerance does not see; None = never).
+    an edge that moved by a pixel, which the depth test's one-pixel tolerance does not see; None = never). A pixel
+    is changed too where the measurements of its 5×5 window drift from their runs' means: each adds its departure
+    in noise units, clipped to ±1, and the sum exceeds ``drift_test`` times the root of their count (a z-score),
+    where the window's colour changed by at least half ``color_test`` (a slanted surface sliding by a pixel or two a
+    frame, which the depth test's one-pixel tolerance passes; a real sensor's depth drifts so on a still scene, but
+    its colour stays; :func:`~torch_depth_sr.stream.change.drifting`; None = never; no test without colour).
     In a static window a measurement that matches no previous value
     near it by ``outlier_test`` is an outlier in time, dropped where the past was measured, unless it repeats the
     previous frame's dropped or held-out value (None = never). One that left the mean of its run by as much is held
@@ -459,6 +464,12 @@ class StreamConfig(Group):
     # frame's and the mean flicker at most the stream's without the test (docs/measurements/issue28-stream/
     # twentieth-stop/shift_test_tuning.py)
     shift_test: Optional[float] = 0.5
+    # a z-score (5 never fires: a full window's sum is at most 25 = 5·√25). Before its colour gate, of 3, 4 and 5 on the
+    # 15 fitting sequences at 480×640 (the tuning ones and seeds 300-303): the lowest mean trail whose mean flicker
+    # stays within 0.5 % of no test's (3: +3.7 %). With the gate (docs/measurements/issue28-stream/thirty-first-stop/):
+    # 3 and 4 give the same mean trail over those and the 45 fitting sequences at 120×160 (0.8854), 4 the lower RMSE
+    # and flicker at 120×160; at 480×640 RMSE 0.704 -> 0.689, trail 0.910 -> 0.880 of frame by frame's, flicker the same
+    drift_test: Optional[float] = 4.0
     # the speed against the accuracy: of 0.05, 0.1, 0.25, 0.5, 1 and 2, the largest whose 2006 streams (fitting split)
     # stay within 0.5 % of no hold's mean ratio to frame by frame and whose 45 synthetic fitting sequences are no worse
     # in the mean RMSE, flicker and trail. Refitted at the twenty-eighth stop, when outputs became held only while the
@@ -485,7 +496,8 @@ class StreamConfig(Group):
                                "outlier_test": optional(positive), "color_test": positive,
                                "window": integer(1, odd=True), "dilate": integer(0), "reuse_matches": boolean,
                                "keep_scale": boolean, "join_cap": optional(positive),
-                               "shift_test": optional(real(0.0, 1.0)), "hold": optional(positive),
+                               "shift_test": optional(real(0.0, 1.0)), "drift_test": optional(positive),
+                               "hold": optional(positive),
                                "layers": optional(integer(1)), "settled_frames": optional(positive),
                                "single_support": optional(integer(1))}
 

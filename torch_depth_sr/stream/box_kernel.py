@@ -10,7 +10,8 @@ a column pass, by bands of columns, the window means. Rows, and bands, split acr
 (:func:`~torch_depth_sr.native.run_range`) with the same results for any thread count.
 The stream's noise units (:func:`~torch_depth_sr.stream.change.local_spread`,
 :func:`~torch_depth_sr.stream.change.remembered_spread`) use the same passes on planes made on the fly (``|y − x|``
-where measured, and the measured pixels), without the torch path's temporaries, and the same values.
+where measured, and the measured pixels), without the torch path's temporaries, and the same values; so does the
+change test's drift test (:func:`~torch_depth_sr.stream.change.drifting`).
 Compiled by LLVM at first use and cached on disk (``cache=True``).
 """
 from __future__ import annotations
@@ -21,7 +22,7 @@ from numba import njit
 
 from ..native import run_range
 
-__all__ = ["box_mean_cpu", "local_spread_cpu", "remembered_spread_cpu"]
+__all__ = ["box_mean_cpu", "drift_cpu", "local_spread_cpu", "remembered_spread_cpu"]
 
 _BAND = 64  # columns per task of the column pass
 _MIN_ROWS = 16  # rows per task of the row pass below which one thread does it
@@ -199,4 +200,75 @@ def remembered_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tens
     out = np.empty((b, 1, h, w), dtype=dtype)
     run_range(_remember, b * h, means, np.ascontiguousarray(past_spread.detach().numpy()),
               np.ascontiguousarray(static.detach().numpy()), consts, out, min_share=_MIN_ROWS)
+    return torch.from_numpy(out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _drift_rows(t0, t1, y, observed, mean, has, noise, window, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·H`` rows: :func:`_rows`' sums of the two planes ``change.drifting`` boxes, made
+    on the fly and summed side by side: sample ``b``'s plane ``2b`` holds ``clamp((y − mean) / noise, ±clip)`` where
+    measured with a run (else 0), plane ``2b + 1`` those pixels (1 or 0), each value in the dtype first, as the torch
+    path's."""
+    h, w = y.shape[2], y.shape[3]
+    p = window // 2
+    n = w + 2 * p + 1
+    c = np.empty((2, n))
+    d = np.empty(1, dtype=y.dtype)  # a store rounds to the dtype, as each torch operation does
+    one, clip = np.float64(consts[0]), consts[1]
+    for t in range(t0, t1):
+        b = t // h
+        i = t - b * h
+        acc = 0.0
+        count = 0.0
+        for k in range(n):
+            j = k - p - 1
+            if 0 <= j < w and observed[b, 0, i, j] > 0 and has[b, 0, i, j]:
+                d[0] = y[b, 0, i, j] - mean[b, 0, i, j]
+                d[0] = d[0] / noise[b, 0, i, j]
+                d[0] = min(max(d[0], -clip), clip)
+                acc += np.float64(d[0])
+                count += one
+            else:
+                acc += 0.0
+                count += 0.0
+            c[0, k] = acc
+            c[1, k] = count
+        for j in range(w):
+            out[2 * b, i, j] = c[0, j + window] - c[0, j]
+            out[2 * b + 1, i, j] = c[1, j + window] - c[1, j]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _drift_verdict(t0, t1, means, consts, out):
+    """Rows ``[t0, t1)`` of the ``B·H`` rows: the window's sum and count from its means (each rounded to the dtype,
+    then times the window's area in the dtype), and the verdict ``count ≥ 2.5 and |sum| > test · √count``."""
+    h, w = out.shape[2], out.shape[3]
+    r = np.empty(4, dtype=consts.dtype)
+    area, least, test, zero = consts[2], consts[3], consts[4], consts[5]
+    for t in range(t0, t1):
+        b = t // h
+        i = t - b * h
+        for j in range(w):
+            r[0] = means[2 * b, i, j]
+            r[1] = means[2 * b + 1, i, j]
+            r[2] = r[0] * area
+            r[3] = r[1] * area
+            out[b, 0, i, j] = r[3] >= least and abs(r[2]) > test * np.sqrt(max(r[3], zero))
+
+
+def drift_cpu(y: torch.Tensor, observed: torch.Tensor, mean: torch.Tensor, has: torch.Tensor, noise: torch.Tensor,
+              test: float, window: int, clip: float) -> torch.Tensor:
+    """``change.drifting`` for (B,1,H,W) CPU tensors of one float dtype (``has`` bool), no gradient: the same window
+    sums in the same order (:func:`_rows`' and :func:`_columns`' passes) of planes made on the fly."""
+    b, _, h, w = y.shape
+    arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, mean, has, noise)]
+    dtype = arrays[0].dtype
+    consts = np.array([1.0, clip, window * window, 2.5, test, 0.0], dtype=dtype)
+    rows = np.empty((b * 2, h, w), dtype=np.float64)
+    run_range(_drift_rows, b * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
+    means = np.empty_like(rows)
+    bands = -(-w // _BAND)
+    run_range(_columns, b * 2 * bands, rows, window, bands, means)
+    out = np.empty((b, 1, h, w), dtype=np.bool_)
+    run_range(_drift_verdict, b * h, means, consts, out, min_share=_MIN_ROWS)
     return torch.from_numpy(out)

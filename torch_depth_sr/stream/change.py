@@ -18,7 +18,14 @@ A pixel is *changed* (:func:`change_test`) when its colour or its depth changed 
   of a few measured pixels among holes needs all of them;
 * shift (``shift_test``): the window matches a one-pixel shift of the previous estimate much better than the
   estimate where it was (:mod:`~torch_depth_sr.stream.shift`): an edge that moved by a pixel, which the depth test's
-  nearest value within one pixel does not see. Its unit is the run's bounded one (``join_cap``), at least 2 σ̂.
+  nearest value within one pixel does not see. Its unit is the run's bounded one (``join_cap``), at least 2 σ̂;
+* drift (``drift_test``, :func:`drifting`): the measurements of the 5×5 window lie on one side of their runs' means,
+  and the window's colour changed by at least ``DRIFT_COLOUR`` of ``color_test``. A slanted surface that slides by a
+  pixel or two a frame (a moving object's face) moves the depth at a pixel by less than the depth test's unit each
+  frame, within its one-pixel tolerance, and the run's mean would lag it; each measurement is within the noise, but
+  together they all depart the same way. A real sensor's depth also drifts so on a still scene (a RealSense's, by
+  several noise units over whole windows), but there the colour stays; a sliding surface carries its texture along.
+  Without colour there is no drift test.
 
 The changed pixels are then dilated by ``dilate`` pixels (a moving edge's neighbours). In a static window a single
 measured pixel can still disagree with the past: if its value matches none of the previous values near it (``d1 >
@@ -45,9 +52,15 @@ from ..window_max import dilate
 from .shift import shifted_windows
 
 __all__ = ["ChangeTest", "camera_moved", "change_test", "color_change", "colour_changes", "depth_votes", "distances",
-           "local_spread", "remembered_spread"]
+           "drifting", "local_spread", "remembered_spread"]
 
 _PRIOR = 6.0  # pseudo-votes of "unchanged" per window
+# the drift test's window, and the bound (noise units) on what one measurement adds to its sum: a flying pixel or an
+# impulse, far from its run's mean, weighs no more than a unit
+DRIFT_WINDOW, DRIFT_CLIP = 5, 1.0
+# the share of color_test that the window's colour change must reach for the drift test to count (half: a change
+# the colour test alone does not call one)
+DRIFT_COLOUR = 0.5
 
 
 def _box_mean(v: torch.Tensor, window: int) -> torch.Tensor:
@@ -153,6 +166,28 @@ def depth_votes(d1: torch.Tensor, observed: torch.Tensor, window: int, threshold
     return (num * n) / (den * n + _PRIOR)
 
 
+def drifting(y: torch.Tensor, observed: torch.Tensor, run_mean: torch.Tensor, has_run: torch.Tensor,
+             noise: torch.Tensor, test: float) -> torch.Tensor:
+    """(B,1,H,W) bool: the window's measurements drift from their runs' means. Over the ``DRIFT_WINDOW²`` window, the
+    ``n`` pixels measured now (``observed``) with a run (``has_run``, bool) add ``(y − run_mean) / noise`` each,
+    clipped to ``±DRIFT_CLIP``; the window drifts where ``n ≥ 3`` and the sum exceeds ``test · √n``. On a static
+    surface the terms are independent noise of mean 0, and their sum's spread is at most ``√n`` (each term's at most
+    1): ``test`` is a z-score. A surface that moved by a unit or more since the runs began gives each term its full
+    ``±1``, a sum of ``n`` (``√n = 5`` z-scores in a full window). On the CPU one numba pass without temporaries
+    (:mod:`~torch_depth_sr.stream.box_kernel`, the same verdicts)."""
+    maps = (y, observed, run_mean, noise)
+    fits = all(t.shape == y.shape and t.dtype == y.dtype for t in maps) and has_run.shape == y.shape and y.shape[1] == 1
+    kernel = host_kernel("stream.box_kernel", "drift_cpu", *maps) if fits else None
+    if kernel is not None:
+        return kernel(y, observed, run_mean, has_run, noise, test, DRIFT_WINDOW, DRIFT_CLIP)
+    both = (observed > 0) & has_run
+    d = ((y - run_mean) / noise).clamp(-DRIFT_CLIP, DRIFT_CLIP)
+    d = torch.where(both, d, torch.zeros_like(d))
+    sums = _box_mean(torch.cat([d, both.to(d.dtype)], 1), DRIFT_WINDOW) * (DRIFT_WINDOW * DRIFT_WINDOW)
+    total, n = sums[:, :1], sums[:, 1:]
+    return (n >= 2.5) & (total.abs() > test * n.clamp_min(0).sqrt())
+
+
 @torch.no_grad()
 def camera_moved(rgb: torch.Tensor, previous: torch.Tensor, reach: int = 2) -> torch.Tensor:
     """(B,) the ratio of the smallest mean colour change over the frame after a shift of the previous image by up to
@@ -238,11 +273,15 @@ class ChangeTest(NamedTuple):
 
 def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor, noise: torch.Tensor,
                 rgb: Optional[torch.Tensor], previous_rgb: Optional[torch.Tensor],
-                settings: StreamConfig, shift_noise: Optional[torch.Tensor] = None) -> ChangeTest:
+                settings: StreamConfig, shift_noise: Optional[torch.Tensor] = None,
+                runs: Optional[tuple[torch.Tensor, torch.Tensor]] = None) -> ChangeTest:
     """The change test of one frame (module docstring); ``y``, ``previous`` and ``noise`` in the units of one
     frame. Without ``settings.outlier_test`` no pixel is an *outlier*. With ``settings.shift_test`` a window that a
     one-pixel shift of ``previous`` matches better is changed too (:func:`~torch_depth_sr.stream.shift.shifted_windows`,
-    in units of ``shift_noise``, by default ``noise``)."""
+    in units of ``shift_noise``, by default ``noise``). With ``settings.drift_test`` and ``runs`` (the previous
+    frame's run means, in the units of ``y``, and where a run has one, bool) a window whose measurements drift from
+    their runs' means and whose colour changed by ``DRIFT_COLOUR`` of ``color_test`` is changed too
+    (:func:`drifting`)."""
     with torch.no_grad():
         d1 = _nearest_distance(y, observed, previous, noise)
         changed = depth_votes(d1, observed, settings.window, settings.depth_test) > 0.5
@@ -253,6 +292,9 @@ def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
         if rgb is not None and previous_rgb is not None:
             previous_rgb = previous_rgb.to(rgb)
             colour, own = colour_changes(rgb, previous_rgb, settings.window, settings.color_test)
+            if settings.drift_test is not None and runs is not None:
+                drift = drifting(y, observed, runs[0], runs[1], noise.expand_as(y), settings.drift_test)
+                changed = changed | (drift & (colour > DRIFT_COLOUR * settings.color_test))
             seen = dilate(colour > settings.color_test, settings.dilate)
             if settings.camera_test is not None and min(rgb.shape[-2:]) > 8:
                 moved = (camera_moved(rgb, previous_rgb) < settings.camera_test).view(-1, 1, 1, 1)

@@ -171,13 +171,14 @@ class StreamFrame:
         noise = torch.maximum(st.spread.to(dt) / scale, floor)
         # the run's mean and the shift test read a unit an edge cannot inflate without bound (join_cap)
         joining = noise if s.join_cap is None else torch.minimum(noise, s.join_cap * floor)
+        evidence, mean = st.evidence.to(dt), st.mean.to(dt)
         test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s,
-                           shift_noise=torch.maximum(joining, SHIFT_FLOOR * floor))
+                           shift_noise=torch.maximum(joining, SHIFT_FLOOR * floor),
+                           runs=(obs.normalise(mean), (mean > 0) & (evidence > 0)))
         static = ~test.changed
         if test.own is not None:  # a hole has no depth to test: its own colour must not change
             static = static & ~(test.own & (obs.observed <= 0))
-        evidence = st.evidence.to(dt)
-        runs = join_runs(obs.y, obs.observed, static, test.outlier, joining, evidence, st.mean.to(dt),
+        runs = join_runs(obs.y, obs.observed, static, test.outlier, joining, evidence, mean,
                          st.departed.to(dt), st.age.to(dt), obs.offset, obs.scale, s)
         self.stats["outliers_in_time"] = runs.outlier.float().mean()
         self.stats["held_out"] = runs.held_out.float().mean()

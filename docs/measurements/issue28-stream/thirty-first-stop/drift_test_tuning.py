@@ -3,20 +3,18 @@
 ``trail_lag.py`` put the trail excess at 480×640 inside the movers, on pixels the change test called static: the
 movers are slanted planes sliding by a pixel or two a frame, the depth at a pixel moves by less than the depth test's
 unit a frame, and the runs' means lagged the surface. The drift test (:func:`~torch_depth_sr.stream.change.drifting`)
-calls a 5×5 window changed where its measurements, each clipped to ±4 noise units of its run's mean, depart by more
-than ``drift_test`` units on the mean (at ``72209f8`` a z-score: clipped to ±1, more than ``drift_test`` times
-the root of their count; ``zscore_*.txt``). Variants: ``drift-off`` (None: the stream until this stop) and
+calls a 5×5 window changed where its measurements, each clipped to ±1 noise unit of its run's mean, sum to more than
+``drift_test`` times the root of their count, and where the window's colour changed by at least half the colour
+test: the form shipped at this stop (``drift_test_fit*.txt``). At ``72209f8`` without the colour
+gate (``zscore_*.txt``); with ``tried_drift_test.patch`` on ``e78049c`` the forms of ``clip2_*`` and
+``tabletop_friendly_variants.txt``; ``drift_test_303_480x640.txt`` is a mean of departures clipped to ±4 units
+against ``drift_test`` units, a local edit not kept. Variants: ``drift-off`` (None: the stream until this stop) and
 ``driftK`` (``drift_test = K``). Frame-by-frame restoration runs as shipped. Run like the twenty-fifth stop's
 ``tried_stream_parts.py`` (the same scenes, metrics and report; ``--set tuning+300``: the 15 fitting scenes that
 ``twenty-third-stop/dilate_by_size.py`` runs at 480×640):
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/thirty-first-stop/drift_test_tuning.py \
         --set fit --size 120x160 --variants drift-off drift3 drift4 drift5
-
-The drift test is not shipped: run on ``72209f8`` (the z-score, each departure clipped to ±1 unit:
-``zscore_drift_test_fit15_480x640.txt``), or on ``e78049c`` with ``tried_drift_test.patch`` applied (its last form:
-the clip read from ``DRIFT_CLIP``, default 2 units, ``clip2_drift_test_303_480x640.txt``; ``drift_test_303_480x640.txt``
-was a mean of departures clipped to ±4 units against ``drift_test`` units, an intermediate form not in the patch).
 """
 from __future__ import annotations
 

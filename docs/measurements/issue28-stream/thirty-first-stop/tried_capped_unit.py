@@ -7,7 +7,7 @@ the shift test already read a unit bounded by ``join_cap`` floors; here the dept
 ``capN`` bounds the change test's unit by N floors (a quarter of σ̂, or the quantisation step), ``capjoin`` by the
 shipped ``join_cap``.
 
-Nothing here is shipped: ``change_test`` is wrapped in this process. Run like the twenty-fifth stop's
+Nothing here is shipped: ``change_test`` is wrapped in this process (run at ``e78049c``, as measured). Run like the twenty-fifth stop's
 ``tried_stream_parts.py`` (the same scenes, metrics and report; ``--set tuning+300`` adds seeds 300-303, the 15
 fitting scenes that ``twenty-third-stop/dilate_by_size.py`` runs at 480×640):
 

@@ -10,7 +10,8 @@ a test of the window's mean, which a drift passes and noise does not. W: the win
 ``driftK-w5-cC``: each pixel's ``(y − m) / unit`` clipped to ±C first (C = 0: its sign alone, a sign test), so that a
 flying pixel or an impulse, far from its run's mean, weighs no more than a unit.
 
-Nothing here is shipped: ``change_test`` is wrapped in this process. Run like ``tried_capped_unit.py``:
+``change_test`` is wrapped in this process; the package has had its own drift test since (``StreamConfig.drift_test``,
+with a colour gate): run this at ``e78049c``, before it, or the two add up. Run like ``tried_capped_unit.py``:
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/thirty-first-stop/tried_drift_test.py \
         --set tuning+300 --size 480x640 --variants shipped drift4
