@@ -58,6 +58,7 @@ print(f"clip {a.clip}, test {a.test}: frame, share of the static region the drif
 for t, (flag, dep, unit) in enumerate(SEEN, 1):
     f = flag[:rows]
     if f.any():
-        print(f"  {t:3d}  {f.mean():.4f}  {np.abs(dep[:rows][f]).mean():.4f} / {np.abs(dep[:rows][f] / unit[:rows][f]).mean():.2f}")
+        far = np.abs(dep[:rows][f])
+        print(f"  {t:3d}  {f.mean():.4f}  {far.mean():.4f} / {(far / unit[:rows][f]).mean():.2f}")
     else:
         print(f"  {t:3d}  0")
