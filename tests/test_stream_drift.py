@@ -1,5 +1,6 @@
 """The change test's drift test (``StreamConfig.drift_test``, :func:`torch_depth_sr.stream.change.drifting`): a
-window whose measurements all depart one way from their runs' means is changed, whatever each departs by alone."""
+window whose measurements all depart one way from their runs' means is changed, whatever each departs by alone, where
+its colour changed a little too (a sliding surface carries its texture; a sensor's depth drift moves no colour)."""
 from __future__ import annotations
 
 import numpy as np
