@@ -79,15 +79,23 @@ def _columns(t0, t1, r, window, bands, out):
                 out[plane, y, x] = (c[y + window, x - x0] - c[y, x - x0]) / area
 
 
+def _window_means(row_pass, row_tasks: int, planes: int, h: int, w: int, window: int, *args) -> np.ndarray:
+    """(planes, H, W) float64: the window means of planes whose row sums ``row_pass(t0, t1, *args, out)`` writes into
+    ``out`` over ``row_tasks`` tasks (:func:`_rows` and the passes that make their planes on the fly), then the column
+    pass (:func:`_columns`)."""
+    rows = np.empty((planes, h, w), dtype=np.float64)
+    run_range(row_pass, row_tasks, *args, rows, min_share=_MIN_ROWS)
+    means = np.empty_like(rows)
+    bands = -(-w // _BAND)
+    run_range(_columns, planes * bands, rows, window, bands, means)
+    return means
+
+
 def box_mean_cpu(v: torch.Tensor, window: int) -> torch.Tensor:
     """``change._box_mean(v, window)`` of ``v (B,C,H,W)`` float32 or float64 on the CPU, no gradient."""
     b, ch, h, w = v.shape
     a = np.ascontiguousarray(v.detach().numpy().reshape(b * ch, h, w))
-    rows = np.empty(a.shape, dtype=np.float64)
-    run_range(_rows, b * ch * h, a, window, rows, min_share=_MIN_ROWS)
-    means = np.empty_like(rows)
-    bands = -(-w // _BAND)
-    run_range(_columns, b * ch * bands, rows, window, bands, means)
+    means = _window_means(_rows, b * ch * h, b * ch, h, w, window, a, window)
     return torch.from_numpy(means).view(b, ch, h, w).to(v.dtype)
 
 
@@ -150,13 +158,9 @@ def local_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tensor, w
     b, nc, h, w = x.shape
     arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, x)]
     dtype = arrays[0].dtype
-    rows = np.empty((b * (nc + 1), h, w), dtype=np.float64)
     consts = np.array([1.0, 0.0, 1e-12], dtype=dtype)  # one, zero, the torch path's clamp of the measured share
     none = np.empty((b, 0, h, w), dtype=dtype)
-    run_range(_spread_rows, b * (nc + 1) * h, *arrays, none, window, consts, rows, min_share=_MIN_ROWS)
-    means = np.empty_like(rows)
-    bands = -(-w // _BAND)
-    run_range(_columns, b * (nc + 1) * bands, rows, window, bands, means)
+    means = _window_means(_spread_rows, b * (nc + 1) * h, b * (nc + 1), h, w, window, *arrays, none, window, consts)
     out = np.empty((b, nc, h, w), dtype=dtype)
     run_range(_spread_ratio, b * nc * h, means, consts, out, min_share=_MIN_ROWS)
     return torch.from_numpy(out)
@@ -192,11 +196,7 @@ def remembered_spread_cpu(y: torch.Tensor, observed: torch.Tensor, x: torch.Tens
     arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, x, past)]
     dtype = arrays[0].dtype
     consts = np.array([1.0, 0.0, 1e-12, memory], dtype=dtype)  # one, zero, the measured share's clamp, the memory
-    rows = np.empty((b * 3, h, w), dtype=np.float64)
-    run_range(_spread_rows, b * 3 * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
-    means = np.empty_like(rows)
-    bands = -(-w // _BAND)
-    run_range(_columns, b * 3 * bands, rows, window, bands, means)
+    means = _window_means(_spread_rows, b * 3 * h, b * 3, h, w, window, *arrays, window, consts)
     out = np.empty((b, 1, h, w), dtype=dtype)
     run_range(_remember, b * h, means, np.ascontiguousarray(past_spread.detach().numpy()),
               np.ascontiguousarray(static.detach().numpy()), consts, out, min_share=_MIN_ROWS)
@@ -264,11 +264,7 @@ def drift_cpu(y: torch.Tensor, observed: torch.Tensor, mean: torch.Tensor, has: 
     arrays = [np.ascontiguousarray(t.detach().numpy()) for t in (y, observed, mean, has, noise)]
     dtype = arrays[0].dtype
     consts = np.array([1.0, clip, window * window, 2.5, test, 0.0], dtype=dtype)
-    rows = np.empty((b * 2, h, w), dtype=np.float64)
-    run_range(_drift_rows, b * h, *arrays, window, consts, rows, min_share=_MIN_ROWS)
-    means = np.empty_like(rows)
-    bands = -(-w // _BAND)
-    run_range(_columns, b * 2 * bands, rows, window, bands, means)
+    means = _window_means(_drift_rows, b * h, b * 2, h, w, window, *arrays, window, consts)
     out = np.empty((b, 1, h, w), dtype=np.bool_)
     run_range(_drift_verdict, b * h, means, consts, out, min_share=_MIN_ROWS)
     return torch.from_numpy(out)

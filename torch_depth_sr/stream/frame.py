@@ -172,9 +172,10 @@ class StreamFrame:
         # the run's mean and the shift test read a unit an edge cannot inflate without bound (join_cap)
         joining = noise if s.join_cap is None else torch.minimum(noise, s.join_cap * floor)
         evidence, mean = st.evidence.to(dt), st.mean.to(dt)
+        drift = s.drift_test is not None and obs.rgb is not None and st.rgb is not None  # the drift test reads them
         test = change_test(obs.y, obs.observed, target, noise, obs.rgb, st.rgb, s,
                            shift_noise=torch.maximum(joining, SHIFT_FLOOR * floor),
-                           runs=(obs.normalise(mean), (mean > 0) & (evidence > 0)))
+                           runs=(obs.normalise(mean), (mean > 0) & (evidence > 0)) if drift else None)
         static = ~test.changed
         if test.own is not None:  # a hole has no depth to test: its own colour must not change
             static = static & ~(test.own & (obs.observed <= 0))
