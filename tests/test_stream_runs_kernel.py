@@ -33,7 +33,7 @@ def _inputs(shape, dtype, seed):
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 @pytest.mark.parametrize("shape", [(1, 1, 1, 1), (1, 1, 3, 5), (2, 1, 37, 70)])
 @pytest.mark.parametrize("settings", [StreamConfig(), StreamConfig(outlier_test=None, weight=0.3, hole_decay=0.7),
-                                      StreamConfig(settled_frames=3)])
+                                      StreamConfig(settled_frames=3, unmeasured_frames=2.0)])
 def test_join_and_grow_kernels_equal_torch(monkeypatch, dtype, shape, settings):
     args = _inputs(shape, dtype, sum(shape))
     joined = runs.join_runs(*args, settings)
@@ -71,3 +71,25 @@ def test_a_run_is_fresh_until_it_is_settled():
         fresh = runs.join_runs(*args, settings).fresh
         assert torch.equal(fresh, ~static | (age + 1 < settled))
     assert torch.equal(runs.join_runs(*args, StreamConfig(settled_frames=1)).fresh, ~static)
+
+
+@pytest.mark.parametrize("numba", [True, False])
+def test_a_hole_the_past_never_measured_confidently_is_not_pulled_to_the_past(monkeypatch, numba):
+    """By default (``unmeasured_frames`` 0) a static hole whose evidence is below ``fill_evidence`` gets no temporal
+    weight: its fill is the frame's own (beside a moving object such a hole, a stereo shadow, was pulled to where
+    the mover had been); one with evidence gets weight × age; with ``unmeasured_frames`` 2, weight × min(age, 2)."""
+    if not numba:
+        monkeypatch.setenv("TORCH_DEPTH_SR_NO_NUMBA", "1")
+    y, observed, static, candidate, noise, evidence, mean, departed, age, offset, scale = _inputs((1, 1, 8, 9),
+                                                                                              torch.float32, 3)
+    observed, static = torch.zeros_like(observed), torch.ones_like(static)  # every pixel a static hole
+    y = torch.zeros_like(y)
+    evidence = torch.where(torch.arange(72).view(1, 1, 8, 9) % 2 == 0, torch.full_like(evidence, 0.5),
+                           torch.full_like(evidence, 3.0))
+    age = torch.full_like(age, 6.0)
+    args = (y, observed, static, candidate, noise, evidence, mean, departed, age, offset, scale)
+    unconfident = evidence < 1.0
+    for settings, pull in ((StreamConfig(), 0.0), (StreamConfig(unmeasured_frames=2.0), 2.0)):
+        weight = runs.join_runs(*args, settings).weight
+        assert torch.equal(weight[unconfident], torch.full_like(weight[unconfident], settings.weight * pull))
+        assert torch.equal(weight[~unconfident], torch.full_like(weight[~unconfident], settings.weight * 6.0))
