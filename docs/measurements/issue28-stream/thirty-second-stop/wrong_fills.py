@@ -4,7 +4,9 @@ A *wrong* pixel is one the output gives a value (not left missing) that is off t
 ``--tolerance`` of its depth (default 5 %): a surface where none is, or at the wrong depth. Counted per method over
 each synthetic sequence's frames, split by the input (measured or a hole) and by the trail region near the movers
 (``evaluation.stream.regions``) or elsewhere, as a share of all pixel-frames (per million). The stream and frame by
-frame restore with ``fill="trusted"``: what a robot that reads only the confident output sees.
+frame restore with ``fill="trusted"``: what a robot that reads only the confident output sees. The last column,
+``holes filled``, counts the input's holes given a value (per million pixel-frames): leaving holes missing is how a
+method avoids wrong fills.
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/thirty-second-stop/wrong_fills.py --size 120x160 \
         --seeds 300 301 302 303
@@ -22,7 +24,7 @@ from torch_depth_sr.datasets.sequences import STREAM_SEQUENCES, TUNING_SEQUENCES
 from torch_depth_sr.evaluation.stream import regions
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
-GROUPS = ("trail, hole", "trail, measured", "elsewhere, hole", "elsewhere, measured")
+GROUPS = ("trail, hole", "trail, measured", "elsewhere, hole", "elsewhere, measured", "holes filled")
 
 
 def _scene(job):
@@ -42,7 +44,8 @@ def _scene(job):
             hole = depth[0] <= 0
             for method, out in outs.items():
                 wrong = np.isfinite(out) & (out > 0) & (np.abs(out - gt[t]) > tolerance * gt[t])
-                for g in GROUPS:
+                counts[method]["holes filled"] += int((hole & np.isfinite(out) & (out > 0)).sum())
+                for g in GROUPS[:-1]:
                     where = (trail[t] if g.startswith("trail") else ~trail[t]) & (hole if g.endswith("hole") else ~hole)
                     counts[method][g] += int((wrong & where).sum())
     return spec.name, gt.size, counts
