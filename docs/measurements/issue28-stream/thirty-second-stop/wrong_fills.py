@@ -89,7 +89,7 @@ def figure(spec, size: tuple, frames: list, path: str) -> None:
                 y0, x0 = int(np.clip(cy - h // 2, 0, size[0] - h)), int(np.clip(cx - w // 2, 0, size[1] - w))
                 rows.append([p[y0:y0 + h, x0:x0 + w] for p in panels])
                 labels.append([f"crop at ({y0}, {x0}), {h}x{w}"] + [""] * 4)
-    print("figure:", write_png(path, mosaic(rows, labels, max_width=320)))
+    print("figure:", write_png(path, mosaic(rows, labels, max_width=240)))
 
 
 def main() -> None:
