@@ -292,11 +292,12 @@ def change_test(y: torch.Tensor, observed: torch.Tensor, previous: torch.Tensor,
         if rgb is not None and previous_rgb is not None:
             previous_rgb = previous_rgb.to(rgb)
             colour, own = colour_changes(rgb, previous_rgb, settings.window, settings.color_test)
-            gate = colour > DRIFT_COLOUR * settings.color_test
-            # the window sums only where the colour lets the test count (on the host, none on a still scene)
-            if settings.drift_test is not None and runs is not None and not (host_path(y.device) and not gate.any()):
-                drift = drifting(y, observed, runs[0], runs[1], noise.expand_as(y), settings.drift_test)
-                changed = changed | (drift & gate)
+            if settings.drift_test is not None and runs is not None:
+                gate = colour > DRIFT_COLOUR * settings.color_test
+                # the window sums only where the colour lets the test count (on the host, none on a still scene)
+                if not (host_path(y.device) and not gate.any()):
+                    drift = drifting(y, observed, runs[0], runs[1], noise.expand_as(y), settings.drift_test)
+                    changed = changed | (drift & gate)
             seen = dilate(colour > settings.color_test, settings.dilate)
             if settings.camera_test is not None and min(rgb.shape[-2:]) > 8:
                 moved = (camera_moved(rgb, previous_rgb) < settings.camera_test).view(-1, 1, 1, 1)
