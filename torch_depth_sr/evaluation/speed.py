@@ -8,8 +8,10 @@ Times, side by side in one run and on the same synthetic inputs
   the per-stage split the model reports in ``info["seconds"]`` (block matching, singular detection, nonlocal terms, CG solves, the edge steps, the
   refiner, the rest = total − those) and the CG iterations of every layer;
 * ``stream``, ``stream-fast``, ``stream-default`` — a :class:`~torch_depth_sr.StreamRestorer` step of ``full``,
-  ``denoise-fast`` and the ``default`` tier on the inputs' static scene (new noise each frame), and ``stream-fast-moving`` — a step on the stream track's moving sensor sequences (movers, flying
-  pixels: the edge steps run), each with its step ÷ a cold frame of the same model on the same frames;
+  ``denoise-fast`` and the ``default`` tier on the inputs' static scene (new noise each frame), and
+  ``stream-fast-moving``, ``stream-default-moving`` — a step of ``denoise-fast`` and of the ``default`` tier on the
+  stream track's moving sensor sequences (movers, flying pixels: the edge steps run), each with its step ÷ a cold
+  frame of the same model on the same frames;
 * ``jbf`` and ``dictionary`` — the baselines with the parameters of ``evaluation/methods.py``;
 * ``kornia-jbf9`` — :func:`kornia.filters.joint_bilateral_blur` with a 9×9 kernel, the outside
   reference every ratio is taken against (``ratio = method time / kornia-jbf9 time``, same size and
@@ -65,7 +67,8 @@ __all__ = [
 ]
 
 METHODS = ("full", "fast", "default", "best", "full-fast", "stream", "stream-fast", "stream-fast-moving", "stream-default",
-           "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9", "dataloader")
+           "stream-default-moving", "bm-exact", "bm-refine", "x0-filter", "jbf", "dictionary", "kornia-jbf9",
+           "dataloader")
 # the model methods and the named model each runs (DepthRestorer.from_preset): the speed tiers fast / default / best,
 # and "full", the frozen configuration's defaults (the default tier until 2026-12-04)
 MODEL_PRESETS = {"full": "full", "fast": "fast", "default": "default", "best": "best", "full-fast": "fast"}
@@ -84,12 +87,14 @@ STREAM_WARM_STEPS = 8
 # step target). Three calls of each in separate processes, minutes apart, gave 53-71 % on this shared 2-core machine
 # in two runs; timing the first call after the other kind made a 1376x1088 step 15 % slower than back to back.
 STREAM_MODELS = {"stream": "full", "stream-fast": "denoise-fast",  # a preset or a shipped model (from_pretrained)
-                 "stream-fast-moving": "denoise-fast", "stream-default": "default"}
-# "stream-fast-moving": the stream track's evaluated sequences (datasets.sequences.STREAM_SEQUENCES, then the tuning
-# ones, one per sample of the batch) at the row's size: movers, flying pixels, holes, the frames of a sensor. The static
-# rows' inputs have no flying pixels, so their frames skip the edge steps that a sensor's take, streamed or not
-# (docs/measurements/h100-2026-12-05). Each call is the next frame; its paired cold frames run on the frame its step
-# took, and its rmse is against that frame's ground truth.
+                 "stream-fast-moving": "denoise-fast", "stream-default": "default",
+                 "stream-default-moving": "default"}
+MOVING_STREAMS = ("stream-fast-moving", "stream-default-moving")
+# "stream-fast-moving", "stream-default-moving": the stream track's evaluated sequences
+# (datasets.sequences.STREAM_SEQUENCES, then the tuning ones, one per sample of the batch) at the row's size: movers,
+# flying pixels, holes, the frames of a sensor. The static rows' inputs have no flying pixels, so their frames skip
+# the edge steps that a sensor's take, streamed or not (docs/measurements/h100-2026-12-05). Each call is the next
+# frame; its paired cold frames run on the frame its step took, and its rmse is against that frame's ground truth.
 # stages of the model timed alone on the model's own inputs (default config): one exact block-matching pass,
 # one re-matching pass by refine_matches (previous matches + a step-2 lattice), the colour-guided x⁰ filter.
 # "dataloader" runs examples/restore_in_dataloader.py (2 workers, 320×240, the fast tier) once and reports its
@@ -98,7 +103,8 @@ SIZES = ((370, 463), (480, 640), (1088, 1376))  # (H, W): Middlebury third size,
 BATCHES = (1, 8)
 DEFAULT_SKIP = ("full@1088x1376x8", "fast@1088x1376x8", "default@1088x1376x8", "best@1088x1376x8",
                 "full-fast@1088x1376x8", "stream@1088x1376x8", "stream-fast@1088x1376x8",
-                "stream-fast-moving@1088x1376x8", "stream-default@1088x1376x8", "dictionary@1088x1376x8")
+                "stream-fast-moving@1088x1376x8", "stream-default@1088x1376x8",
+                "stream-default-moving@1088x1376x8", "dictionary@1088x1376x8")
 STAGES = ("block_matching", "singular", "nonlocal", "cg")
 POST_STAGES = ("snap", "refine")  # the edge steps and the edge refiner (row["post_stages"])
 
@@ -148,8 +154,8 @@ def _make_runner(method: str, device: str, frames: int = 0):
 
     if method in MODEL_PRESETS:
         return _model_runner(named_model(MODEL_PRESETS[method]).to(device))
-    if method == "stream-fast-moving":
-        return _moving_stream_runner(device, frames)
+    if method in MOVING_STREAMS:
+        return _moving_stream_runner(STREAM_MODELS[method], device, frames)
     if method in STREAM_MODELS:
         from ..stream import StreamRestorer
 
@@ -184,14 +190,14 @@ def _make_runner(method: str, device: str, frames: int = 0):
     raise ValueError(f"unknown speed method {method!r}; allowed are {list(METHODS)}.")
 
 
-def _moving_stream_runner(device: str, frames: int):
-    """``stream-fast-moving``: each call steps a :class:`~torch_depth_sr.StreamRestorer` of ``denoise-fast`` to the
-    next frame of the moving sequences (the inputs it is given only tell the size and batch); ``step.frame`` is the
-    frame it last took and ``step.gt`` its ground truth."""
+def _moving_stream_runner(model: str, device: str, frames: int):
+    """``stream-fast-moving``, ``stream-default-moving``: each call steps a :class:`~torch_depth_sr.StreamRestorer` of
+    ``model`` (a preset or a shipped model) to the next frame of the moving sequences (the inputs it is given only
+    tell the size and batch); ``step.frame`` is the frame it last took and ``step.gt`` its ground truth."""
     from ..datasets.sequences import STREAM_SEQUENCES, TUNING_SEQUENCES, make_sequence
     from ..stream import StreamRestorer
 
-    stream = StreamRestorer(named_model(STREAM_MODELS["stream-fast-moving"]).to(device))
+    stream = StreamRestorer(named_model(model).to(device))
     specs = [*STREAM_SEQUENCES, *TUNING_SEQUENCES]
     cache: dict = {}
 

@@ -1,9 +1,9 @@
 """Issue 28: a stream setting on and off (default ``keep_scale``: the previous frame's scale policy while the scene
-stays) on streams of Middlebury 2006 scenes (the FITTING split): the stream model (``denoise-fast``) with each, against
-frame-by-frame restoration, on a static stream and on one with a mover.
+stays) on streams of Middlebury 2006 scenes (the FITTING split): the stream model (``denoise-fast``; ``--model``:
+another) with each, against frame-by-frame restoration, on a static stream and on one with a mover.
 
     python docs/measurements/issue28-stream/setting_2006.py [--setting keep_scale] [--off false --on true] [--frames 16]
-        [--scenes Baby1 Cloth1 Midd1 Wood1]
+        [--scenes Baby1 Cloth1 Midd1 Wood1] [--model default]
 
 Each frame is the ``paper`` / ``sensor`` degradation with seed t. Prints per scene the RMSE over the frames from
 ``--frames // 2`` (static) or from frame 10 (mover) divided by frame-by-frame restoration's, then the mean and the
@@ -18,6 +18,7 @@ import torch
 from middlebury_streams import MOVER_FROM, arguments, degraded_frames, scenes
 
 from torch_depth_sr.evaluation.bench import _metrics
+from torch_depth_sr.model import named_model
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 
 
@@ -26,9 +27,10 @@ def main() -> None:
     p.add_argument("--setting", default="keep_scale", help="a field of StreamConfig")
     p.add_argument("--off", default="false", help="its value for 'off', as JSON (default false; e.g. null)")
     p.add_argument("--on", default="true", help="its value for 'on', as JSON (default true; e.g. 80)")
+    p.add_argument("--model", default=None, help="a preset or shipped model (default: the stream's, denoise-fast)")
     a = p.parse_args()
     torch.set_num_threads(a.threads)
-    model = default_stream_model()
+    model = default_stream_model() if a.model is None else named_model(a.model)
     variants = {"off": {a.setting: json.loads(a.off)}, "on": {a.setting: json.loads(a.on)}}
     for case, mover, start in (("static", False, a.frames // 2), ("mover", True, MOVER_FROM)):
         for track in ("paper", "sensor"):

@@ -3,15 +3,17 @@ against frame-by-frame restoration.
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/setting_synthetic.py --setting hold
         [--set fit|fresh|check|evaluated] [--values none 0.05 0.1 0.25] [--processes 2] [--rule lowest-trail]
+        [--model default]
 
 ``--set fit``: the three tuning sequences and the three recipes with seeds 300–303 and 400–409 (45 scenes; the
 evaluated sequences, seeds 1–3, are never loaded). ``--set fresh``: seeds 200–205; ``--set check``: seeds 500–505
 (18 scenes each, never used to choose); ``--set evaluated``: the stream track's three sequences. The stream model
-(``denoise-fast``) with each value, every other setting its own; per scene RMSE, flicker and trail divided by
-frame-by-frame restoration's (the stream track's scores), then the mean and the worst of each and the count of scenes
-that miss issue 28's targets (RMSE or trail above 1, flicker above 0.5). ``--rule lowest-trail`` (with ``--set fit``
-and ``none`` among the values): among the values that leave no scene's RMSE above frame-by-frame's and the mean
-flicker at most that of ``none``, the lowest mean trail (the twentieth stop's rule for ``shift_test``).
+(``denoise-fast``; ``--model``: another) with each value, every other setting its own; per scene RMSE, flicker and
+trail divided by frame-by-frame restoration's (the stream track's scores), then the mean and the worst of each and
+the count of scenes that miss issue 28's targets (RMSE or trail above 1, flicker above 0.5). ``--rule lowest-trail``
+(with ``--set fit`` and ``none`` among the values): among the values that leave no scene's RMSE above
+frame-by-frame's and the mean flicker at most that of ``none``, the lowest mean trail (the twentieth stop's rule for
+``shift_test``).
 """
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ from torch_depth_sr import restore_depth  # noqa: E402
 from torch_depth_sr.datasets.sequences import (STREAM_SEQUENCES, TUNING_SEQUENCES, make_sequence,  # noqa: E402
                                                recipe_sequences)
 from torch_depth_sr.evaluation.stream import regions, synthetic_metrics  # noqa: E402
+from torch_depth_sr.model import named_model  # noqa: E402
 from torch_depth_sr.stream import StreamRestorer, default_stream_model  # noqa: E402
 
 SETS = {"fit": lambda: [*TUNING_SEQUENCES, *recipe_sequences(range(300, 304)), *recipe_sequences(range(400, 410))],
@@ -39,9 +42,9 @@ SETS = {"fit": lambda: [*TUNING_SEQUENCES, *recipe_sequences(range(300, 304)), *
 
 
 def _scene(job) -> tuple[str, list]:
-    spec, setting, values = job
+    spec, setting, values, model_name = job
     torch.set_num_threads(1)
-    model = default_stream_model()
+    model = default_stream_model() if model_name is None else named_model(model_name)
     seq = make_sequence(spec, frames=30, height=120, width=160)
     reg = regions(seq)
     base = synthetic_metrics(restored_frames(lambda d, c: restore_depth(d, c, model=model), seq), seq, reg)
@@ -59,11 +62,12 @@ def main(setting: str = "hold", values: tuple = ("none", "0.1"), rule: str = "",
     p.add_argument("--values", nargs="+", default=list(values), help="numbers, or none")
     p.add_argument("--processes", type=int, default=2)
     p.add_argument("--rule", choices=("", "lowest-trail"), default=rule)
+    p.add_argument("--model", default=None, help="a preset or shipped model (default: the stream's, denoise-fast)")
     a = p.parse_args()
-    values = [None if v == "none" else float(v) for v in a.values]
+    values = [None if v == "none" else int(v) if v.isdigit() else float(v) for v in a.values]
     specs = SETS[a.set]()
     with Pool(a.processes) as pool:
-        results = pool.map(_scene, [(s, a.setting, values) for s in specs], chunksize=1)
+        results = pool.map(_scene, [(s, a.setting, values, a.model) for s in specs], chunksize=1)
     for name, rows in results:
         print(f"{name:22s} " + " | ".join(f"{v}: " + " ".join(f"{x:.4f}" for x in r) for v, r in zip(values, rows)))
     print("(rmse flicker trail, stream ÷ frame by frame)")

@@ -9,6 +9,8 @@ stream's change test (static or changed) and the input (measured or a hole). Fit
 truth and the movers' masks to sort pixels, which the stream never does.
 
     OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/thirty-first-stop/trail_lag.py --size 480x640 --seeds 303
+    OMP_NUM_THREADS=1 python docs/measurements/issue28-stream/thirty-first-stop/trail_lag.py --seeds 400 401 402 403 \
+        404 405 406 407 408 409 --recipe static-busy
 """
 from __future__ import annotations
 
@@ -87,11 +89,13 @@ def main() -> None:
     p.add_argument("--size", default="480x640")
     p.add_argument("--processes", type=int, default=2)
     p.add_argument("--seeds", type=int, nargs="+", default=[303], help="fitting seeds only (300-303, 400-409)")
+    p.add_argument("--recipe", default=None, help="one recipe only (static-2movers, pan-then-hold, static-busy)")
     a = p.parse_args()
     size = tuple(int(t) for t in a.size.split("x"))
-    specs = [s for s in recipe_sequences(a.seeds)]
+    specs = [s for s in recipe_sequences(a.seeds) if a.recipe in (None, s.name.split("@")[0])]
     with Pool(a.processes) as pool:
         results = pool.map(_scene, [(s, size) for s in specs], chunksize=1)
+    shares: dict = defaultdict(float)  # each group's share of the MSE difference, summed over the scenes
     for name, n, sums in results:
         rs, rf = np.sqrt(sums.pop("stream") / n), np.sqrt(sums.pop("frame") / n)
         print(f"{name} at {a.size}: trail {rs:.2f} stream, {rf:.2f} frame by frame; MSE difference "
@@ -99,6 +103,12 @@ def main() -> None:
         for k, v in sums.items():
             if not k.startswith("n ") and sums["n " + k]:
                 print(f"  {k:48s} {v / n:+9.2f}   ({int(sums['n ' + k])})")
+                shares[k] += v / n / len(results)
+                shares["n " + k] += sums["n " + k]
+    if len(results) > 1:
+        print(f"mean over the {len(results)} scenes, by group (pixel-frames in all):")
+        for k in sorted((k for k in shares if not k.startswith("n ")), key=shares.get):
+            print(f"  {k:48s} {shares[k]:+9.2f}   ({int(shares['n ' + k])})")
 
 
 if __name__ == "__main__":
