@@ -1,6 +1,7 @@
 """The ``default`` tier in a stream (issue 28, thirty-third stop): its ``config.json`` runs one layer on the whole
-frame once a stream has a past. With all eight layers everywhere, its stream was worse than frame-by-frame restoration
-on textured Middlebury 2006 streams (``docs/measurements/issue28-stream/thirty-third-stop/``)."""
+frame once a stream has a past, with a temporal prior of half the stream model's weight. With all eight layers
+everywhere and that weight, its stream was worse than frame-by-frame restoration on textured Middlebury 2006 streams
+(``docs/measurements/issue28-stream/thirty-third-stop/``)."""
 from __future__ import annotations
 
 import pytest
@@ -12,16 +13,17 @@ from torch_depth_sr.datasets.discover import find_scenes
 from torch_depth_sr.degradations import make_degradation
 
 
-def test_the_default_tier_streams_with_one_whole_frame_layer():
+def test_the_default_tier_streams_with_its_fitted_settings():
     model = DepthRestorer.from_preset("default")
-    assert model.config.stream is not None and model.config.stream.layers == 1
-    assert StreamRestorer(model).settings.layers == 1
+    assert model.config.stream is not None
+    settings = StreamRestorer(model).settings
+    assert (settings.layers, settings.weight) == (1, 0.25)
 
 
 def test_a_default_tier_stream_of_a_textured_2006_scene_beats_frame_by_frame():
     """Wood1 (fitting split), a 128×160 centre crop, the ``paper`` degradation with seed t in frame t: over frames
-    8–11 the stream's RMSE is below frame-by-frame's, and below the same stream's with every layer everywhere (which
-    came out above frame-by-frame's here: 0.85 against 0.61)."""
+    8–11 the stream's RMSE is below frame-by-frame's, and below the stream's with every layer everywhere and the
+    weight of before (which came out above frame-by-frame's here: 0.85 against 0.61)."""
     torch.set_num_threads(1)
     root = require_data_root("middlebury2006")
     rec = next((r for r in find_scenes(root, "paper") if r.name == "Wood1"), None)
@@ -33,7 +35,8 @@ def test_a_default_tier_stream_of_a_textured_2006_scene_beats_frame_by_frame():
     scene = {k: v[..., rows, cols].clone() if torch.is_tensor(v) and v.shape[-2:] == (h, w) else v
              for k, v in scene.items()}
     model = DepthRestorer.from_preset("default")
-    streams = {"fitted": StreamRestorer(model), "every layer": StreamRestorer(model, {"layers": None})}
+    streams = {"fitted": StreamRestorer(model),
+               "every layer": StreamRestorer(model, {"layers": None, "weight": 0.5})}  # as it streamed before
     errors: dict = {"frame": [], "fitted": [], "every layer": []}
     with torch.no_grad():
         for t in range(12):
