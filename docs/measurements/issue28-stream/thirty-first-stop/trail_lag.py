@@ -46,16 +46,11 @@ def _where(moving: np.ndarray, t: int) -> np.ndarray:
     return out
 
 
-def _scene(job):
-    spec, size = job
-    torch.set_num_threads(1)
-    seq = make_sequence(spec, frames=30, height=size[0], width=size[1])
+def trail_errors(seq: dict, stream: StreamRestorer, model):
+    """Per frame with a trail region: ``(t, depth, step details, region, squared error of the stream, of frame by
+    frame)``, the stream stepped on every frame (also ``shadow_fill.py``'s loop)."""
     trail = regions(seq)["trail"]
-    moving = seq["moving"][:, 0].astype(bool)
-    model = default_stream_model().eval()
-    stream = StreamRestorer(model)
     gt = seq["gt"][:, 0].astype(np.float64)
-    sums: dict = defaultdict(float)
     with torch.no_grad():
         for t in range(len(gt)):
             depth, rgb = seq["depth"][t].astype(np.float32), seq["rgb"][t]
@@ -66,20 +61,31 @@ def _scene(job):
                 continue
             es = (np.nan_to_num(s.depth[0]) - gt[t]) ** 2
             ef = (np.nan_to_num(np.asarray(f)[0]) - gt[t]) ** 2
-            diff = es - ef
-            where = _where(moving, t)
-            static = s.static[0] > 0
-            hole = depth[0] <= 0
-            for k in PLACES:
-                for cname, cm in (("static", static), ("changed", ~static)):
-                    for hname, hm in (("measured", ~hole), ("hole", hole)):
-                        m = region & (where == k) & cm & hm
-                        key = f"{PLACES[k]}, {cname}, {hname}"
-                        sums[key] += diff[m].sum()
-                        sums["n " + key] += m.sum()
-            sums["pixels"] += region.sum()
-            sums["stream"] += es[region].sum()
-            sums["frame"] += ef[region].sum()
+            yield t, depth, s, region, es, ef
+
+
+def _scene(job):
+    spec, size = job
+    torch.set_num_threads(1)
+    seq = make_sequence(spec, frames=30, height=size[0], width=size[1])
+    moving = seq["moving"][:, 0].astype(bool)
+    model = default_stream_model().eval()
+    sums: dict = defaultdict(float)
+    for t, depth, s, region, es, ef in trail_errors(seq, StreamRestorer(model), model):
+        diff = es - ef
+        where = _where(moving, t)
+        static = s.static[0] > 0
+        hole = depth[0] <= 0
+        for k in PLACES:
+            for cname, cm in (("static", static), ("changed", ~static)):
+                for hname, hm in (("measured", ~hole), ("hole", hole)):
+                    m = region & (where == k) & cm & hm
+                    key = f"{PLACES[k]}, {cname}, {hname}"
+                    sums[key] += diff[m].sum()
+                    sums["n " + key] += m.sum()
+        sums["pixels"] += region.sum()
+        sums["stream"] += es[region].sum()
+        sums["frame"] += ef[region].sum()
     n = sums.pop("pixels")
     return spec.name, n, sums
 

@@ -11,16 +11,19 @@ Reads ground truth and the movers' masks to sort pixels, which the stream never 
 from __future__ import annotations
 
 import argparse
+import sys
 from multiprocessing import Pool
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from torch_depth_sr import restore_depth
 from torch_depth_sr.datasets.sequences import make_sequence, recipe_sequences
-from torch_depth_sr.evaluation.stream import regions
 from torch_depth_sr.stream import StreamRestorer, default_stream_model
 from torch_depth_sr.window_max import dilate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "thirty-first-stop"))
+from trail_lag import trail_errors  # noqa: E402  (the thirty-first stop's per-frame loop)
 
 # a variant: StreamConfig settings, or "holesR" (below)
 SETTINGS = {"shipped": {}, "unmeasured0": {"unmeasured_frames": 0.0}, "unmeasured1": {"unmeasured_frames": 1.0}}
@@ -52,30 +55,19 @@ def _scene(job):
     torch.set_num_threads(1)
     _patch(variant)
     seq = make_sequence(spec, frames=30, height=size[0], width=size[1])
-    trail = regions(seq)["trail"]
     moving = seq["moving"][:, 0].astype(bool)
     model = default_stream_model().eval()
     stream = StreamRestorer(model, SETTINGS.get(variant, {}))
-    gt = seq["gt"][:, 0].astype(np.float64)
     s_sum = f_sum = n = 0.0
     groups = {"shadow, static": 0.0, "shadow, changed": 0.0, "elsewhere": 0.0}
-    with torch.no_grad():
-        for t in range(len(gt)):
-            depth, rgb = seq["depth"][t].astype(np.float32), seq["rgb"][t]
-            s = stream.step(depth, rgb, return_details=True)
-            f = restore_depth(depth, rgb, model=model)
-            region = trail[t]
-            if not region.any():
-                continue
-            es = (np.nan_to_num(s.depth[0]) - gt[t]) ** 2
-            ef = (np.nan_to_num(np.asarray(f)[0]) - gt[t]) ** 2
-            diff = (es - ef)
-            ring = region & ~moving[t] & _grown(moving[t], 2) & (depth[0] <= 0)
-            static = s.static[0] > 0
-            groups["shadow, static"] += diff[ring & static].sum()
-            groups["shadow, changed"] += diff[ring & ~static].sum()
-            groups["elsewhere"] += diff[region & ~ring].sum()
-            s_sum, f_sum, n = s_sum + es[region].sum(), f_sum + ef[region].sum(), n + region.sum()
+    for t, depth, s, region, es, ef in trail_errors(seq, stream, model):
+        diff = (es - ef)
+        ring = region & ~moving[t] & _grown(moving[t], 2) & (depth[0] <= 0)
+        static = s.static[0] > 0
+        groups["shadow, static"] += diff[ring & static].sum()
+        groups["shadow, changed"] += diff[ring & ~static].sum()
+        groups["elsewhere"] += diff[region & ~ring].sum()
+        s_sum, f_sum, n = s_sum + es[region].sum(), f_sum + ef[region].sum(), n + region.sum()
     return spec.name, variant, np.sqrt(s_sum / n), np.sqrt(f_sum / n), {k: v / n for k, v in groups.items()}
 
 
